@@ -1,0 +1,45 @@
+"""What an object to be grasped is, as users and the wire describe it.
+
+An object is named (a built-in shape, a pybullet_data mesh or a YCB folder entry) or given as
+a mesh file, with its physical properties. Workers turn it into a pybullet body; the
+coordinator stores it by the content hash of its mesh.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class ObjectSpec(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    name: str | None = Field(
+        default=None,
+        description=(
+            "built-in ('sphere', 'cube', 'can', 'dumbbell', 'mug', 'spiked_ball'), "
+            "pybullet_data ('pb:mug', 'pb:bunny', 'pb:duck', 'pb:teddy') or a YCB folder "
+            "entry ('ycb:YcbPowerDrill')"
+        ),
+    )
+    mesh_path: str | None = Field(
+        default=None, description="mesh file (OBJ, STL, PLY, GLB) in metres"
+    )
+    mass_kg: float | None = Field(
+        default=None, gt=0.0, le=50.0, description="mass; default: the named object's own"
+    )
+    friction: float | None = Field(
+        default=None, ge=0.0, le=5.0, description="lateral friction coefficient"
+    )
+    inertia_diag: tuple[float, float, float] | None = Field(
+        default=None,
+        description="principal moments of inertia, kg·m²; default: from the mesh at mass_kg",
+    )
+    scale: float = Field(default=1.0, gt=0.0, le=100.0, description="uniform mesh scale")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> ObjectSpec:
+        if (self.name is None) == (self.mesh_path is None):
+            raise ValueError("give exactly one of 'name' and 'mesh_path'")
+        if self.inertia_diag is not None and min(self.inertia_diag) <= 0:
+            raise ValueError("inertia_diag entries must be positive")
+        return self

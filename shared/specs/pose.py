@@ -1,0 +1,41 @@
+"""The pose space P: one initial relative pose of the gripper around an object.
+
+θ (polar angle from the object's +z) and φ (azimuth) give the approach direction from the
+object's centre of mass; r is the start gap between the palm surface and the nearest object
+point; roll turns the gripper about its palm normal, pitch and yaw tilt the palm normal off
+the surface normal. Angles in radians, distances in metres.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import BaseModel, ConfigDict, Field
+
+# Pose keys are rounded so that the same grid point computed along two paths (a coarse pass
+# and a refinement, or two workers) gets one key. 1e-6 rad and 1e-6 m are far below any step.
+_KEY_DIGITS = 6
+
+
+class Pose(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    theta: float = Field(ge=0.0, le=math.pi, description="polar angle from object +z, rad")
+    phi: float = Field(description="azimuth about object +z, rad (wrapped to [0, 2π))")
+    r: float = Field(ge=0.0, le=1.0, description="start gap palm surface ↔ nearest object point, m")
+    roll: float = Field(default=0.0, description="rotation about the palm normal, rad")
+    pitch: float = Field(default=0.0, ge=-math.pi / 2, le=math.pi / 2, description="tilt, rad")
+    yaw: float = Field(default=0.0, ge=-math.pi / 2, le=math.pi / 2, description="tilt, rad")
+
+    def key(self) -> str:
+        """A stable text key: equal for poses that are the same grid point."""
+        phi = math.fmod(self.phi, 2 * math.pi)
+        if phi < 0:
+            phi += 2 * math.pi
+        if self.theta < 10 ** -_KEY_DIGITS or math.pi - self.theta < 10 ** -_KEY_DIGITS:
+            phi = 0.0  # every azimuth is the same point at a pole
+        roll = math.fmod(self.roll, 2 * math.pi)
+        if roll < 0:
+            roll += 2 * math.pi
+        parts = (self.theta, phi, self.r, roll, self.pitch, self.yaw)
+        return "/".join(f"{round(v, _KEY_DIGITS) + 0.0:.{_KEY_DIGITS}f}" for v in parts)

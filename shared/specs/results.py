@@ -1,0 +1,74 @@
+"""What the evaluation of one pose returns: the grasp configuration, its signature and μs."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from graspscape.shared.specs.pose import Pose
+
+
+class Outcome(StrEnum):
+    HELD = "held"  # a grasp formed and the object stayed in it along the trajectory
+    DROPPED = "dropped"  # a grasp formed but the object slipped out during the trajectory
+    NO_GRASP = "no_grasp"  # the hand closed but the object was not enclosed
+    NO_CONTACT = "no_contact"  # the approach never touched the object
+    INFEASIBLE = "infeasible"  # the start pose could not be placed without interpenetration
+
+
+class ContactPoint(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    link: str
+    position_object: tuple[float, float, float] = Field(description="in the object frame, m")
+    normal_force_n: float
+
+
+class GraspSignature(BaseModel):
+    """What kind of grasp formed: which links touch where, and how the hand ended up."""
+
+    model_config = ConfigDict(frozen=True)
+
+    links_in_contact: tuple[str, ...]
+    contacts: tuple[ContactPoint, ...]
+    joint_angles: dict[str, float]
+
+
+class GraspConfiguration(BaseModel):
+    """The paper's (η_r(t_c), θ_g(t_c)): base pose in the object frame and joint angles."""
+
+    model_config = ConfigDict(frozen=True)
+
+    base_position: tuple[float, float, float]
+    base_orientation: tuple[float, float, float, float] = Field(description="quaternion xyzw")
+    joint_angles: dict[str, float]
+
+
+class PhaseTimes(BaseModel):
+    reset_s: float = 0.0
+    approach_s: float = 0.0
+    closing_s: float = 0.0
+    trajectory_s: float = 0.0
+    sensitivity_s: float = 0.0
+    approach_steps: int = 0
+    closing_steps: int = 0
+    trajectory_steps: int = 0
+    sensitivity_steps: int = 0
+
+
+class PoseResult(BaseModel):
+    pose: Pose
+    pose_key: str
+    outcome: Outcome
+    viable: bool = Field(description="a grasp formed and held along the trajectory")
+    mu_s: float = Field(ge=0.0, le=1.0)
+    effective_r: float | None = Field(
+        default=None, description="start gap actually used (after backing off), m"
+    )
+    effort_max_nm: float = Field(default=0.0, description="largest joint torque used, N·m")
+    contacts_per_link: dict[str, int] = Field(default_factory=dict)
+    grasp: GraspConfiguration | None = None
+    signature: GraspSignature | None = None
+    eval_time_s: float = 0.0
+    phases: PhaseTimes = Field(default_factory=PhaseTimes)
