@@ -1,0 +1,36 @@
+"""Objects to grasp: names and mesh files -> COM-frame geometry and pybullet bodies.
+
+prepare_object is pure (no physics client) and caches convex decompositions on disk;
+spawn_object turns its result into a body in a given client. See docs/objects.md.
+"""
+
+from .catalog import describe, list_builtin_objects
+from .errors import (
+    EmptyMesh,
+    NonFiniteVertices,
+    NotWatertight,
+    ObjectError,
+    TooManyFaces,
+    UnknownObject,
+    UnreadableMesh,
+    ZeroVolume,
+)
+from .prepare import PreparedObject, prepare_object
+from .spawn import forget_client, spawn_object
+
+__all__ = [
+    "EmptyMesh",
+    "NonFiniteVertices",
+    "NotWatertight",
+    "ObjectError",
+    "PreparedObject",
+    "TooManyFaces",
+    "UnknownObject",
+    "UnreadableMesh",
+    "ZeroVolume",
+    "describe",
+    "forget_client",
+    "list_builtin_objects",
+    "prepare_object",
+    "spawn_object",
+]
