@@ -1,0 +1,155 @@
+"""Routes for explorations: submit, list, one with progress, cancel, delete, its poses."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Path, Query, Response, status
+from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
+from graspscape.services.coordinator.exploration import service
+from graspscape.services.coordinator.exploration.schemas import (
+    ExplorationCreated,
+    ExplorationDetail,
+    ExplorationOut,
+    ExplorationPage,
+    PoseFilter,
+    PoseOut,
+    PosePage,
+)
+from graspscape.shared.specs.exploration import ExplorationSpec
+
+router = APIRouter(tags=["explorations"])
+
+Id = Annotated[int, Path(ge=1, le=2**31 - 1, description="exploration id")]
+_NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no such exploration"}}
+
+
+def _float(description: str) -> Any:
+    return Query(allow_inf_nan=False, description=description)
+
+
+@router.post(
+    "/explorations",
+    response_model=ExplorationCreated,
+    status_code=status.HTTP_201_CREATED,
+    dependencies=Mutating,
+    responses={
+        401: {"description": "bearer token required"},
+        422: {"description": "invalid spec or unknown object (detail names it)"},
+    },
+    summary="Submit an exploration; its coarse-pass tiles are queued at once",
+)
+def submit(spec: ExplorationSpec, session: SessionDep, settings: SettingsDep) -> Any:
+    row = service.create_exploration(
+        session,
+        spec=spec,
+        tile_target_poses=settings.tile_target_poses,
+        max_poses=settings.max_poses_per_exploration,
+    )
+    return ExplorationCreated(
+        id=row.id, status=row.status, tiles_total=row.tiles_total, poses_total=row.poses_total
+    )
+
+
+@router.get("/explorations", response_model=ExplorationPage, summary="List explorations")
+def list_explorations(
+    session: SessionDep,
+    status_: Annotated[
+        Literal["queued", "running", "done", "cancelled"] | None, Query(alias="status")
+    ] = None,
+    object_id: Annotated[int | None, Query(ge=1, le=2**31 - 1)] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0, le=2**31 - 1)] = 0,
+) -> Any:
+    rows, total = service.list_explorations(
+        session, status=status_, object_id=object_id, limit=limit, offset=offset
+    )
+    return ExplorationPage(
+        items=[ExplorationOut.model_validate(r) for r in rows],
+        total=total,
+        limit=limit,
+        offset=offset,
+    )
+
+
+@router.get(
+    "/explorations/{exploration_id}",
+    response_model=ExplorationDetail,
+    responses=_NOT_FOUND,
+    summary="One exploration with its progress",
+)
+def get_exploration(exploration_id: Id, session: SessionDep, settings: SettingsDep) -> Any:
+    row = service.get_exploration(session, exploration_id=exploration_id)
+    progress = service.progress(session, row=row, window_s=settings.throughput_window_s)
+    return ExplorationDetail.model_validate(
+        {**ExplorationOut.model_validate(row).model_dump(), "progress": progress}
+    )
+
+
+@router.post(
+    "/explorations/{exploration_id}/cancel",
+    response_model=ExplorationOut,
+    dependencies=Mutating,
+    responses={
+        **_NOT_FOUND,
+        401: {"description": "bearer token required"},
+        409: {"description": "the exploration is already done"},
+    },
+    summary="Cancel: no more tiles are handed out; stored results stay",
+)
+def cancel(exploration_id: Id, session: SessionDep) -> Any:
+    return service.cancel_exploration(session, exploration_id=exploration_id)
+
+
+@router.delete(
+    "/explorations/{exploration_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    dependencies=Mutating,
+    responses={**_NOT_FOUND, 401: {"description": "bearer token required"}},
+    summary="Delete an exploration with its tiles and poses",
+)
+def delete(exploration_id: Id, session: SessionDep) -> Response:
+    service.delete_exploration(session, exploration_id=exploration_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.get(
+    "/explorations/{exploration_id}/poses",
+    response_model=PosePage,
+    responses={**_NOT_FOUND, 422: {"description": "bad filter (detail names it)"}},
+    summary="Evaluated poses, oldest first, keyset-paginated, with filters",
+)
+def list_poses(
+    exploration_id: Id,
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    cursor: Annotated[int | None, Query(ge=0, le=2**31 - 1, description="next_cursor")] = None,
+    viable: bool | None = None,
+    manifold_id: Annotated[int | None, Query(ge=1, le=2**31 - 1)] = None,
+    mu_min: Annotated[float | None, _float("μs ≥ this")] = None,
+    mu_max: Annotated[float | None, _float("μs ≤ this")] = None,
+    theta_min: Annotated[float | None, _float("θ ≥ this, rad")] = None,
+    theta_max: Annotated[float | None, _float("θ ≤ this, rad")] = None,
+    phi_min: Annotated[float | None, _float("φ ≥ this, rad")] = None,
+    phi_max: Annotated[float | None, _float("φ ≤ this, rad")] = None,
+    r_min: Annotated[float | None, _float("r ≥ this, m")] = None,
+    r_max: Annotated[float | None, _float("r ≤ this, m")] = None,
+) -> Any:
+    filters = PoseFilter(
+        viable=viable,
+        manifold_id=manifold_id,
+        mu_min=mu_min,
+        mu_max=mu_max,
+        theta_min=theta_min,
+        theta_max=theta_max,
+        phi_min=phi_min,
+        phi_max=phi_max,
+        r_min=r_min,
+        r_max=r_max,
+    )
+    rows, next_cursor = service.list_poses(
+        session, exploration_id=exploration_id, filters=filters, limit=limit, cursor=cursor
+    )
+    return PosePage(
+        items=[PoseOut.model_validate(r) for r in rows], limit=limit, next_cursor=next_cursor
+    )

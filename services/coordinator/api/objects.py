@@ -1,0 +1,128 @@
+"""Routes for objects: POST /objects (mesh upload or name), GET list and one."""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Any
+
+from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile, status
+from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
+from graspscape.services.coordinator.errors import InvalidInput, PayloadTooLarge
+from graspscape.services.coordinator.objects import service
+from graspscape.services.coordinator.objects.schemas import ObjectOut, ObjectPage
+
+router = APIRouter(tags=["objects"])
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {"description": "bearer token required"},
+    413: {"description": "upload larger than max_upload_bytes"},
+    415: {"description": "unsupported mesh file format"},
+    422: {"description": "invalid properties, name or mesh (the detail names the problem)"},
+}
+
+
+def _inertia(text: str | None) -> tuple[float, float, float] | None:
+    if text is None or text == "":
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise InvalidInput("inertia_diag must be three finite comma-separated numbers, kg·m²")
+    return values  # type: ignore[return-value]
+
+
+def _read_limited(upload: UploadFile, limit: int) -> bytes:
+    data = upload.file.read(limit + 1)
+    if len(data) > limit:
+        raise PayloadTooLarge(f"mesh file is larger than the upload limit of {limit} bytes")
+    return data
+
+
+@router.post(
+    "/objects",
+    response_model=ObjectOut,
+    status_code=status.HTTP_201_CREATED,
+    dependencies=Mutating,
+    responses={
+        200: {"description": "the same object was stored before", "model": ObjectOut},
+        **_ERRORS,
+    },
+    summary="Store an object: upload a mesh (with properties) or name one",
+)
+def create_object(
+    request: Request,
+    response: Response,
+    session: SessionDep,
+    settings: SettingsDep,
+    file: Annotated[UploadFile | None, File(description="mesh: .obj .stl .ply .glb .off")] = None,
+    name: Annotated[
+        str | None,
+        Form(max_length=300, description="built-in, 'pb:…', 'ycb:…' or 'shared:<file>'"),
+    ] = None,
+    mass_kg: Annotated[float | None, Form(description="kg, (0, 50]")] = None,
+    friction: Annotated[float | None, Form(description="lateral friction, [0, 5]")] = None,
+    scale: Annotated[float | None, Form(description="uniform mesh scale, (0, 100]")] = None,
+    inertia_diag: Annotated[
+        str | None, Form(max_length=200, description="'Ixx,Iyy,Izz' in kg·m²")
+    ] = None,
+) -> Any:
+    length = request.headers.get("content-length")
+    # Multipart overhead on top of the file is small; refuse clearly oversized bodies outright.
+    if length and length.isdigit() and int(length) > settings.max_upload_bytes + 64 * 1024:
+        raise PayloadTooLarge(
+            f"request body is larger than the upload limit of {settings.max_upload_bytes} bytes"
+        )
+    props: dict[str, Any] = {
+        k: v
+        for k, v in {
+            "mass_kg": mass_kg,
+            "friction": friction,
+            "scale": scale,
+            "inertia_diag": _inertia(inertia_diag),
+        }.items()
+        if v is not None
+    }
+    for label, text in (("name", name), ("file name", file.filename if file else None)):
+        if text is not None and _CONTROL.search(text):
+            raise InvalidInput(f"{label} contains control characters")
+    if file is not None and name:
+        raise InvalidInput("give either a mesh file or a name, not both")
+    if file is not None:
+        data = _read_limited(file, settings.max_upload_bytes)
+        row, created = service.create_uploaded(
+            session, filename=file.filename, data=data, properties=props
+        )
+    elif name:
+        row, created = service.create_named(
+            session, name=name, properties=props, shared_dir=settings.shared_objects_dir
+        )
+    else:
+        raise InvalidInput("give a mesh file (field 'file') or an object name (field 'name')")
+    if not created:
+        response.status_code = status.HTTP_200_OK
+    return row
+
+
+@router.get("/objects", response_model=ObjectPage, summary="List stored objects")
+def list_objects(
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0, le=2**31 - 1)] = 0,
+) -> Any:
+    rows, total = service.list_objects(session, limit=limit, offset=offset)
+    return ObjectPage(
+        items=[ObjectOut.model_validate(r) for r in rows], total=total, limit=limit, offset=offset
+    )
+
+
+@router.get(
+    "/objects/{object_id}",
+    response_model=ObjectOut,
+    responses={404: {"description": "no such object"}},
+)
+def get_object(session: SessionDep, object_id: Annotated[int, Path(ge=1, le=2**31 - 1)]) -> Any:
+    return service.get_object(session, object_id=object_id)

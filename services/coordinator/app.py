@@ -1,0 +1,81 @@
+"""The FastAPI app factory: wires settings, database, routers, errors, metrics, lease sweeper.
+
+`create_app(settings)` builds an independent app (tests make one per database); the lease
+sweeper puts expired leases back in the queue at start (so a restart recovers the tiles of
+workers that died meanwhile) and then every requeue_interval_s.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator
+
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+from graspscape.services.coordinator import db
+from graspscape.services.coordinator.api import explorations, health, objects, workers
+from graspscape.services.coordinator.errors import CoordinatorError
+from graspscape.services.coordinator.metrics import Metrics
+from graspscape.services.coordinator.settings import Settings, get_settings
+from graspscape.services.coordinator.store.queue import requeue_expired
+from starlette.concurrency import run_in_threadpool
+
+log = logging.getLogger("graspscape.coordinator")
+
+
+def _sweep(app: FastAPI) -> None:
+    with app.state.sessionmaker() as session:
+        report = requeue_expired(session, max_attempts=app.state.settings.max_attempts)
+    if report.requeued or report.failed:
+        log.info("expired leases: %d tiles queued again, %d failed", report.requeued, report.failed)
+
+
+async def _sweeper(app: FastAPI) -> None:
+    while True:
+        await asyncio.sleep(app.state.settings.requeue_interval_s)
+        try:
+            await run_in_threadpool(_sweep, app)
+        except Exception:  # a database hiccup must not kill the sweeper for good
+            log.exception("lease sweep failed; retrying next interval")
+
+
+@contextlib.asynccontextmanager
+async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
+    try:
+        await run_in_threadpool(_sweep, app)
+    except Exception:  # e.g. not migrated yet: /healthz reports it, the sweeper retries
+        log.exception("initial lease sweep failed")
+    task = asyncio.create_task(_sweeper(app))
+    try:
+        yield
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        app.state.engine.dispose()
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or get_settings()
+    app = FastAPI(
+        title="Graspscape coordinator",
+        version="0.1.0",
+        description="Explorations of grasp affordances: objects, explorations, results, workers.",
+        lifespan=_lifespan,
+    )
+    app.state.settings = settings
+    app.state.engine = db.make_engine(settings.resolved_database_url)
+    app.state.sessionmaker = db.make_sessionmaker(app.state.engine)
+    app.state.schema_head = db.head_revision()
+    app.state.metrics = Metrics(app.state.sessionmaker)
+    app.middleware("http")(app.state.metrics.middleware)
+
+    @app.exception_handler(CoordinatorError)
+    async def _domain_error(_request: Request, exc: CoordinatorError) -> JSONResponse:
+        return JSONResponse({"detail": exc.message}, status_code=exc.status_code)
+
+    for router in (objects.router, explorations.router, workers.router, health.router):
+        app.include_router(router)
+    return app

@@ -1,0 +1,1 @@
+"""Explorations: submission, tiles of work, progress, results queries."""

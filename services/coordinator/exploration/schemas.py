@@ -1,0 +1,109 @@
+"""Pydantic shapes of explorations, progress and poses at the HTTP boundary."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from graspscape.shared.specs.exploration import ExplorationSpec
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class ExplorationOut(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    id: int
+    object_id: int
+    spec: ExplorationSpec
+    status: str = Field(description="queued, running, done or cancelled")
+    tiles_total: int
+    poses_total: int = Field(description="poses of the coarse pass")
+    poses_done: int
+    viable_count: int
+    created_at: datetime
+    updated_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+
+
+class Progress(BaseModel):
+    tiles: dict[str, int] = Field(description="tiles by state")
+    poses_done: int
+    poses_total: int
+    fraction_done: float
+    viable_share: float | None = Field(description="viable / done; null before any pose")
+    throughput_poses_per_s: float = Field(description="over the last throughput window")
+    eta_s: float | None = Field(description="remaining / throughput; null when stalled")
+
+
+class ExplorationDetail(ExplorationOut):
+    progress: Progress
+
+
+class ExplorationPage(BaseModel):
+    items: list[ExplorationOut]
+    total: int
+    limit: int
+    offset: int
+
+
+class ExplorationCreated(BaseModel):
+    id: int
+    status: str
+    tiles_total: int
+    poses_total: int
+
+
+class PoseOut(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    id: int
+    pose_key: str
+    tile_id: int | None
+    theta: float
+    phi: float
+    r: float
+    roll: float
+    pitch: float
+    yaw: float
+    outcome: str
+    viable: bool
+    mu_s: float
+    effective_r: float | None
+    effort_max_nm: float
+    contacts_per_link: dict[str, Any] | None
+    signature: dict[str, Any] | None
+    grasp: dict[str, Any] | None
+    manifold_id: int | None
+    worker_id: str | None
+    eval_time_s: float
+    created_at: datetime
+
+
+class PosePage(BaseModel):
+    items: list[PoseOut]
+    limit: int
+    next_cursor: int | None = Field(description="pass as ?cursor= for the next page; null at end")
+
+
+class PoseFilter(BaseModel):
+    """Filters of GET /explorations/{id}/poses; every range is inclusive."""
+
+    viable: bool | None = None
+    manifold_id: int | None = None
+    mu_min: float | None = None
+    mu_max: float | None = None
+    theta_min: float | None = None
+    theta_max: float | None = None
+    phi_min: float | None = None
+    phi_max: float | None = None
+    r_min: float | None = None
+    r_max: float | None = None
+
+    def inverted_ranges(self) -> list[str]:
+        bad = []
+        for name in ("mu", "theta", "phi", "r"):
+            lo, hi = getattr(self, f"{name}_min"), getattr(self, f"{name}_max")
+            if lo is not None and hi is not None and lo > hi:
+                bad.append(f"{name}_min ({lo}) is greater than {name}_max ({hi})")
+        return bad

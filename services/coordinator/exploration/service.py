@@ -1,0 +1,201 @@
+"""Explorations: submit (with its coarse-pass tiles), list, progress, cancel, delete, poses."""
+
+from __future__ import annotations
+
+from datetime import datetime, timedelta
+
+from graspscape.services.coordinator.errors import Conflict, InvalidInput, NotFound
+from graspscape.services.coordinator.exploration.schemas import PoseFilter, Progress
+from graspscape.services.coordinator.exploration.tiling import coarse_tiles, count_poses
+from graspscape.services.coordinator.store.base import utcnow
+from graspscape.services.coordinator.store.models import (
+    ExplorationRow,
+    ExplorationStatus,
+    ManifoldRow,
+    ObjectRow,
+    PoseRow,
+    TileRow,
+    TileState,
+)
+from graspscape.shared.specs.exploration import ExplorationSpec
+from sqlalchemy import delete, func, insert, select, update
+from sqlalchemy.orm import Session
+
+_TILE_INSERT_CHUNK = 2000
+
+
+def create_exploration(
+    session: Session, *, spec: ExplorationSpec, tile_target_poses: int, max_poses: int
+) -> ExplorationRow:
+    if session.get(ObjectRow, spec.object_id) is None:
+        raise InvalidInput(f"object_id {spec.object_id} does not exist; upload it to /objects")
+    poses_total = count_poses(spec.grid)
+    if poses_total > max_poses:
+        raise InvalidInput(
+            f"the pose grid has {poses_total} poses, more than the limit of {max_poses}; "
+            "raise grid.dtheta or grid.dr, or use fewer attitudes"
+        )
+    tiles = coarse_tiles(spec.grid, target_poses=tile_target_poses)
+    now = utcnow()
+    row = ExplorationRow(
+        object_id=spec.object_id,
+        spec=spec.model_dump(mode="json"),
+        status=ExplorationStatus.QUEUED,
+        tiles_total=len(tiles),
+        poses_total=poses_total,
+        poses_done=0,
+        viable_count=0,
+        created_at=now,
+        updated_at=now,
+    )
+    session.add(row)
+    session.flush()
+    values = [
+        {
+            "exploration_id": row.id,
+            "level": 0,
+            "index": t.index,
+            "cells": [list(c) for c in t.cells],
+            "r_levels": t.r_levels,
+            "attitudes": [list(a) for a in t.attitudes],
+            "n_poses": t.n_poses,
+            "state": TileState.QUEUED,
+            "lease_epoch": 0,
+            "attempts": 0,
+            "updated_at": now,
+        }
+        for t in tiles
+    ]
+    for start in range(0, len(values), _TILE_INSERT_CHUNK):
+        session.execute(insert(TileRow), values[start : start + _TILE_INSERT_CHUNK])
+    session.commit()
+    return row
+
+
+def get_exploration(session: Session, *, exploration_id: int) -> ExplorationRow:
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    return row
+
+
+def list_explorations(
+    session: Session, *, status: str | None, object_id: int | None, limit: int, offset: int
+) -> tuple[list[ExplorationRow], int]:
+    query = select(ExplorationRow)
+    if status is not None:
+        query = query.where(ExplorationRow.status == status)
+    if object_id is not None:
+        query = query.where(ExplorationRow.object_id == object_id)
+    total = session.scalar(select(func.count()).select_from(query.subquery())) or 0
+    rows = session.scalars(query.order_by(ExplorationRow.id).limit(limit).offset(offset)).all()
+    return list(rows), total
+
+
+def progress(
+    session: Session, *, row: ExplorationRow, window_s: float, now: datetime | None = None
+) -> Progress:
+    now = now or utcnow()
+    tiles = {state.value: 0 for state in TileState}
+    for state, count in session.execute(
+        select(TileRow.state, func.count())
+        .where(TileRow.exploration_id == row.id)
+        .group_by(TileRow.state)
+    ):
+        tiles[state] = count
+    recent = (
+        session.scalar(
+            select(func.count())
+            .select_from(PoseRow)
+            .where(
+                PoseRow.exploration_id == row.id,
+                PoseRow.created_at >= now - timedelta(seconds=window_s),
+            )
+        )
+        or 0
+    )
+    throughput = recent / window_s
+    remaining = max(0, row.poses_total - row.poses_done)
+    if row.status in (ExplorationStatus.DONE, ExplorationStatus.CANCELLED) or remaining == 0:
+        eta: float | None = 0.0
+    else:
+        eta = remaining / throughput if throughput > 0 else None
+    return Progress(
+        tiles=tiles,
+        poses_done=row.poses_done,
+        poses_total=row.poses_total,
+        fraction_done=min(1.0, row.poses_done / row.poses_total) if row.poses_total else 1.0,
+        viable_share=row.viable_count / row.poses_done if row.poses_done else None,
+        throughput_poses_per_s=throughput,
+        eta_s=eta,
+    )
+
+
+def cancel_exploration(session: Session, *, exploration_id: int) -> ExplorationRow:
+    """Stop handing out its tiles. Results of tiles already out are still stored on arrival."""
+    row = get_exploration(session, exploration_id=exploration_id)
+    if row.status == ExplorationStatus.CANCELLED:
+        return row
+    if row.status == ExplorationStatus.DONE:
+        raise Conflict(f"exploration {exploration_id} is already done; nothing to cancel")
+    now = utcnow()
+    session.execute(
+        update(TileRow)
+        .where(
+            TileRow.exploration_id == exploration_id,
+            TileRow.state.in_((TileState.QUEUED, TileState.LEASED)),
+        )
+        .values(state=TileState.CANCELLED, lease_owner=None, lease_expires_at=None, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+    row.status = ExplorationStatus.CANCELLED
+    row.finished_at = now
+    row.updated_at = now
+    session.commit()
+    return row
+
+
+def delete_exploration(session: Session, *, exploration_id: int) -> None:
+    get_exploration(session, exploration_id=exploration_id)
+    # Children first, explicitly: the FK cascades would do it too, but this does not depend
+    # on SQLite's foreign_keys pragma being on for whoever opened the connection.
+    for model in (PoseRow, ManifoldRow, TileRow):
+        session.execute(delete(model).where(model.exploration_id == exploration_id))
+    session.execute(delete(ExplorationRow).where(ExplorationRow.id == exploration_id))
+    session.commit()
+
+
+def list_poses(
+    session: Session,
+    *,
+    exploration_id: int,
+    filters: PoseFilter,
+    limit: int,
+    cursor: int | None,
+) -> tuple[list[PoseRow], int | None]:
+    """Keyset pagination by row id: stable while results keep arriving."""
+    get_exploration(session, exploration_id=exploration_id)
+    problems = filters.inverted_ranges()
+    if problems:
+        raise InvalidInput("; ".join(problems))
+    query = select(PoseRow).where(PoseRow.exploration_id == exploration_id)
+    if cursor is not None:
+        query = query.where(PoseRow.id > cursor)
+    if filters.viable is not None:
+        query = query.where(PoseRow.viable == filters.viable)
+    if filters.manifold_id is not None:
+        query = query.where(PoseRow.manifold_id == filters.manifold_id)
+    for column, name in (
+        (PoseRow.mu_s, "mu"),
+        (PoseRow.theta, "theta"),
+        (PoseRow.phi, "phi"),
+        (PoseRow.r, "r"),
+    ):
+        lo, hi = getattr(filters, f"{name}_min"), getattr(filters, f"{name}_max")
+        if lo is not None:
+            query = query.where(column >= lo)
+        if hi is not None:
+            query = query.where(column <= hi)
+    rows = list(session.scalars(query.order_by(PoseRow.id).limit(limit + 1)))
+    next_cursor = rows[limit - 1].id if len(rows) > limit else None
+    return rows[:limit], next_cursor

@@ -1,0 +1,1 @@
+"""Objects to be grasped: upload, mesh validation, storage."""

@@ -1,0 +1,76 @@
+"""Coordinator settings: defaults < configs/coordinator.toml < GRASPSCAPE_* env vars < arguments.
+
+One cached object (`get_settings`) serves the process; tests and the CLI build their own
+`Settings(...)` and hand it to `create_app`, so nothing global leaks between them. Secrets
+(the API token, a database password inside the URL) come from the environment, never the
+config file in the repository.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+from pydantic import Field, SecretStr
+from pydantic_settings import (
+    BaseSettings,
+    PydanticBaseSettingsSource,
+    SettingsConfigDict,
+    TomlConfigSettingsSource,
+)
+
+CONFIG_ENV = "GRASPSCAPE_CONFIG"
+DEFAULT_CONFIG = Path("configs/coordinator.toml")
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="GRASPSCAPE_", extra="ignore")
+
+    data_dir: Path = Field(default=Path("data"), description="folder of the embedded database")
+    database_url: str | None = Field(
+        default=None,
+        description="SQLAlchemy URL; default: SQLite file coordinator.db under data_dir",
+    )
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=1, le=65535)
+    api_token: SecretStr | None = Field(
+        default=None, description="when set, mutating routes need 'Authorization: Bearer <it>'"
+    )
+    max_upload_bytes: int = Field(default=50 * 1024 * 1024, ge=1024)
+    shared_objects_dir: Path | None = Field(
+        default=None, description="folder of meshes that POST /objects may name as 'shared:<file>'"
+    )
+    lease_seconds: float = Field(default=300.0, gt=0, description="how long a tile lease lasts")
+    max_attempts: int = Field(default=3, ge=1, description="leases of a tile before it fails")
+    requeue_interval_s: float = Field(default=10.0, gt=0, description="expired-lease sweep period")
+    tile_target_poses: int = Field(default=100, ge=1, le=10_000, description="poses per tile")
+    max_poses_per_exploration: int = Field(default=5_000_000, ge=1)
+    throughput_window_s: float = Field(default=60.0, gt=0, description="window of poses/s")
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        toml_file = Path(os.environ.get(CONFIG_ENV, DEFAULT_CONFIG))
+        return (
+            init_settings,
+            env_settings,
+            TomlConfigSettingsSource(settings_cls, toml_file=toml_file),
+        )
+
+    @property
+    def resolved_database_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'coordinator.db').as_posix()}"
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    return Settings()

@@ -1,0 +1,1 @@
+"""The coordinator store: ORM models, the tile queue, result ingest, worker registry."""

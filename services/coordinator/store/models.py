@@ -1,0 +1,166 @@
+"""The coordinator's tables. The schema itself is made only by the Alembic migrations.
+
+The coordinator is the only process that writes here. Counters on `explorations` (poses_done,
+viable_count) are kept by the ingest in the same transaction as the rows they count, so that
+progress is one row read instead of a scan over millions of poses.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from enum import StrEnum
+from typing import Any
+
+from graspscape.services.coordinator.store.base import Base, utcnow
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import Mapped, mapped_column
+
+
+class ExplorationStatus(StrEnum):
+    QUEUED = "queued"  # no tile leased yet
+    RUNNING = "running"
+    DONE = "done"  # every tile done or failed
+    CANCELLED = "cancelled"
+
+
+class TileState(StrEnum):
+    QUEUED = "queued"
+    LEASED = "leased"
+    DONE = "done"
+    FAILED = "failed"  # failed max_attempts times; last_error says why
+    CANCELLED = "cancelled"  # its exploration was cancelled before it finished
+
+
+TERMINAL_TILE_STATES = (TileState.DONE, TileState.FAILED, TileState.CANCELLED)
+
+
+class ObjectRow(Base):
+    __tablename__ = "objects"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))  # "named" | "upload" | "shared"
+    name: Mapped[str] = mapped_column(String(255))
+    content_hash: Mapped[str | None] = mapped_column(String(64), index=True)
+    mesh_format: Mapped[str | None] = mapped_column(String(8))
+    # Meshes are small (≤ max_upload_bytes) and must survive with the database, so they live
+    # in it rather than in a folder that a backup could miss.
+    mesh: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    properties: Mapped[dict[str, Any]] = mapped_column(JSON)
+    mesh_info: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ExplorationRow(Base):
+    __tablename__ = "explorations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    object_id: Mapped[int] = mapped_column(ForeignKey("objects.id"), index=True)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    status: Mapped[str] = mapped_column(String(16), default=ExplorationStatus.QUEUED, index=True)
+    tiles_total: Mapped[int] = mapped_column(Integer, default=0)
+    poses_total: Mapped[int] = mapped_column(Integer, default=0)
+    poses_done: Mapped[int] = mapped_column(Integer, default=0)
+    viable_count: Mapped[int] = mapped_column(Integer, default=0)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column()
+    finished_at: Mapped[datetime | None] = mapped_column()
+
+
+class TileRow(Base):
+    __tablename__ = "tiles"
+    __table_args__ = (
+        UniqueConstraint("exploration_id", "level", "index"),
+        Index("ix_tiles_state_lease_expires_at", "state", "lease_expires_at"),
+        Index("ix_tiles_exploration_id_state", "exploration_id", "state"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    exploration_id: Mapped[int] = mapped_column(ForeignKey("explorations.id", ondelete="CASCADE"))
+    level: Mapped[int] = mapped_column(Integer, default=0)  # 0 = coarse pass
+    index: Mapped[int] = mapped_column(Integer)
+    cells: Mapped[list[Any]] = mapped_column(JSON)  # [[θ, φ], ...]
+    r_levels: Mapped[list[Any]] = mapped_column(JSON)
+    attitudes: Mapped[list[Any]] = mapped_column(JSON)  # [[roll, pitch, yaw], ...]
+    n_poses: Mapped[int] = mapped_column(Integer)
+    state: Mapped[str] = mapped_column(String(16), default=TileState.QUEUED)
+    lease_owner: Mapped[str | None] = mapped_column(String(128))
+    lease_expires_at: Mapped[datetime | None] = mapped_column()
+    # Bumped on every lease; results carry the epoch they were leased under, so a late report
+    # from a lease that already expired cannot move the tile a second time.
+    lease_epoch: Mapped[int] = mapped_column(Integer, default=0)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    last_error: Mapped[str | None] = mapped_column(Text)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+    done_at: Mapped[datetime | None] = mapped_column()
+
+
+class ManifoldRow(Base):
+    """A behavioral manifold: poses that lead to the same grasp type (filled by clustering)."""
+
+    __tablename__ = "manifolds"
+    __table_args__ = (UniqueConstraint("exploration_id", "label"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    exploration_id: Mapped[int] = mapped_column(ForeignKey("explorations.id", ondelete="CASCADE"))
+    label: Mapped[int] = mapped_column(Integer)
+    signature: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    size: Mapped[int] = mapped_column(Integer, default=0)
+    best_pose_key: Mapped[str | None] = mapped_column(String(128))
+    best_mu_s: Mapped[float | None] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class PoseRow(Base):
+    __tablename__ = "poses"
+    __table_args__ = (
+        # One row per pose of an exploration: the ingest's ON CONFLICT target.
+        UniqueConstraint("exploration_id", "pose_key"),
+        Index("ix_poses_exploration_id_viable", "exploration_id", "viable"),
+        Index("ix_poses_exploration_id_manifold_id", "exploration_id", "manifold_id"),
+        Index("ix_poses_exploration_id_created_at", "exploration_id", "created_at"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    exploration_id: Mapped[int] = mapped_column(ForeignKey("explorations.id", ondelete="CASCADE"))
+    tile_id: Mapped[int | None] = mapped_column(ForeignKey("tiles.id", ondelete="SET NULL"))
+    pose_key: Mapped[str] = mapped_column(String(128))
+    theta: Mapped[float] = mapped_column(Float)
+    phi: Mapped[float] = mapped_column(Float)
+    r: Mapped[float] = mapped_column(Float)
+    roll: Mapped[float] = mapped_column(Float)
+    pitch: Mapped[float] = mapped_column(Float)
+    yaw: Mapped[float] = mapped_column(Float)
+    outcome: Mapped[str] = mapped_column(String(16))
+    viable: Mapped[bool] = mapped_column(Boolean)
+    mu_s: Mapped[float] = mapped_column(Float)
+    effective_r: Mapped[float | None] = mapped_column(Float)
+    effort_max_nm: Mapped[float] = mapped_column(Float)
+    contacts_per_link: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    signature: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    grasp: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    manifold_id: Mapped[int | None] = mapped_column(ForeignKey("manifolds.id", ondelete="SET NULL"))
+    worker_id: Mapped[str | None] = mapped_column(String(128))
+    eval_time_s: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class WorkerRow(Base):
+    __tablename__ = "workers"
+
+    id: Mapped[str] = mapped_column(String(128), primary_key=True)
+    host: Mapped[str] = mapped_column(String(255))
+    capacity: Mapped[int] = mapped_column(Integer)
+    first_seen: Mapped[datetime] = mapped_column(default=utcnow)
+    last_seen: Mapped[datetime] = mapped_column(default=utcnow)

@@ -1,0 +1,257 @@
+"""The tile queue: lease, renew, fail, and put expired leases back.
+
+Each function is one transaction and commits it. Leasing is a single
+`UPDATE … WHERE id IN (SELECT … LIMIT n) RETURNING …`: on PostgreSQL the inner SELECT takes
+`FOR UPDATE SKIP LOCKED`, so concurrent leasers never get the same tile nor wait on each
+other; on SQLite the statement runs under the single write lock, which gives the same.
+Every lease bumps the tile's `lease_epoch`; a report made under an older epoch can still be
+stored but never moves the tile again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from datetime import datetime, timedelta
+from typing import Any
+
+from graspscape.services.coordinator.errors import NotFound
+from graspscape.services.coordinator.exploration.tiling import tile_poses
+from graspscape.services.coordinator.store.base import utcnow
+from graspscape.services.coordinator.store.dialect import is_postgres
+from graspscape.services.coordinator.store.models import (
+    TERMINAL_TILE_STATES,
+    ExplorationRow,
+    ExplorationStatus,
+    TileRow,
+    TileState,
+)
+from graspscape.services.coordinator.store.workers import touch_worker
+from graspscape.shared.specs.pose import Pose
+from pydantic import BaseModel, ConfigDict
+from sqlalchemy import String, cast, literal, select, update
+from sqlalchemy.orm import Session
+
+
+class LeasedTile(BaseModel):
+    """What a worker gets for one tile: the poses to evaluate and the lease to report under."""
+
+    model_config = ConfigDict(frozen=True)
+
+    tile_id: int
+    exploration_id: int
+    level: int
+    index: int
+    lease_epoch: int
+    lease_expires_at: datetime
+    cells: list[tuple[float, float]]
+    r_levels: list[float]
+    attitudes: list[tuple[float, float, float]]
+
+    def poses(self) -> list[Pose]:
+        return tile_poses(self.cells, self.r_levels, self.attitudes)
+
+
+class RequeueReport(BaseModel):
+    requeued: int
+    failed: int
+
+
+def lease_tiles(
+    session: Session,
+    *,
+    worker_id: str,
+    n: int,
+    lease_seconds: float,
+    host: str = "",
+    capacity: int = 1,
+    now: datetime | None = None,
+) -> list[LeasedTile]:
+    """Lease up to n queued tiles to a worker, oldest exploration first."""
+    if n < 1:
+        return []
+    now = now or utcnow()
+    candidates = (
+        select(TileRow.id)
+        .where(TileRow.state == TileState.QUEUED)
+        .order_by(TileRow.exploration_id, TileRow.level, TileRow.id)
+        .limit(n)
+    )
+    if is_postgres(session):
+        candidates = candidates.with_for_update(skip_locked=True)
+    stmt = (
+        update(TileRow)
+        .where(TileRow.id.in_(candidates.scalar_subquery()))
+        .values(
+            state=TileState.LEASED,
+            lease_owner=worker_id,
+            lease_expires_at=now + timedelta(seconds=lease_seconds),
+            lease_epoch=TileRow.lease_epoch + 1,
+            attempts=TileRow.attempts + 1,
+            updated_at=now,
+        )
+        .returning(
+            TileRow.id,
+            TileRow.exploration_id,
+            TileRow.level,
+            TileRow.index,
+            TileRow.lease_epoch,
+            TileRow.lease_expires_at,
+            TileRow.cells,
+            TileRow.r_levels,
+            TileRow.attitudes,
+        )
+        .execution_options(synchronize_session=False)
+    )
+    rows = session.execute(stmt).all()
+    leased = sorted(
+        (
+            LeasedTile(
+                tile_id=row.id,
+                exploration_id=row.exploration_id,
+                level=row.level,
+                index=row.index,
+                lease_epoch=row.lease_epoch,
+                lease_expires_at=row.lease_expires_at,
+                cells=row.cells,
+                r_levels=row.r_levels,
+                attitudes=row.attitudes,
+            )
+            for row in rows
+        ),
+        key=lambda t: t.tile_id,
+    )
+    exploration_ids = {t.exploration_id for t in leased}
+    if exploration_ids:
+        session.execute(
+            update(ExplorationRow)
+            .where(
+                ExplorationRow.id.in_(exploration_ids),
+                ExplorationRow.status == ExplorationStatus.QUEUED,
+            )
+            .values(status=ExplorationStatus.RUNNING, started_at=now, updated_at=now)
+            .execution_options(synchronize_session=False)
+        )
+    touch_worker(session, worker_id=worker_id, host=host, capacity=capacity, now=now)
+    session.commit()
+    return leased
+
+
+def renew_lease(
+    session: Session,
+    *,
+    tile_id: int,
+    lease_epoch: int,
+    lease_seconds: float,
+    now: datetime | None = None,
+) -> bool:
+    """Extend a lease that is still current; False if it was lost (expired and re-leased)."""
+    now = now or utcnow()
+    result = session.execute(
+        update(TileRow)
+        .where(
+            TileRow.id == tile_id,
+            TileRow.state == TileState.LEASED,
+            TileRow.lease_epoch == lease_epoch,
+        )
+        .values(lease_expires_at=now + timedelta(seconds=lease_seconds), updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+    session.commit()
+    return result.rowcount == 1  # type: ignore[attr-defined]
+
+
+def fail_tile(
+    session: Session,
+    *,
+    tile_id: int,
+    lease_epoch: int,
+    error: str,
+    max_attempts: int,
+    now: datetime | None = None,
+) -> str:
+    """A worker could not evaluate its tile: queue it again, or fail it after max_attempts.
+
+    Returns the tile's state afterwards. A report under a stale epoch changes nothing.
+    """
+    now = now or utcnow()
+    tile = session.get(TileRow, tile_id, with_for_update=is_postgres(session))
+    if tile is None:
+        session.rollback()
+        raise NotFound(f"tile {tile_id} does not exist")
+    if tile.state != TileState.LEASED or tile.lease_epoch != lease_epoch:
+        state = tile.state
+        session.rollback()
+        return state
+    tile.last_error = error[:4000]
+    tile.lease_owner = None
+    tile.lease_expires_at = None
+    tile.updated_at = now
+    tile.state = TileState.FAILED if tile.attempts >= max_attempts else TileState.QUEUED
+    session.flush()
+    if tile.state == TileState.FAILED:
+        finish_complete_explorations(session, [tile.exploration_id], now=now)
+    session.commit()
+    return tile.state
+
+
+def requeue_expired(
+    session: Session, *, max_attempts: int, now: datetime | None = None
+) -> RequeueReport:
+    """Put leased tiles whose lease ran out back in the queue (or fail them at the cap)."""
+    now = now or utcnow()
+    expired = (TileRow.state == TileState.LEASED, TileRow.lease_expires_at < now)
+    failed_rows = session.execute(
+        update(TileRow)
+        .where(*expired, TileRow.attempts >= max_attempts)
+        .values(
+            state=TileState.FAILED,
+            last_error=literal("lease expired on attempt ")
+            + cast(TileRow.attempts, String)
+            + literal(f" of {max_attempts}"),
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        )
+        .returning(TileRow.exploration_id)
+        .execution_options(synchronize_session=False)
+    ).all()
+    requeued = session.execute(
+        update(TileRow)
+        .where(*expired)
+        .values(
+            state=TileState.QUEUED,
+            last_error=literal("lease of ") + TileRow.lease_owner + literal(" expired"),
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        )
+        .execution_options(synchronize_session=False)
+    )
+    finish_complete_explorations(session, {row[0] for row in failed_rows}, now=now)
+    session.commit()
+    return RequeueReport(requeued=requeued.rowcount, failed=len(failed_rows))  # type: ignore[attr-defined]
+
+
+def finish_complete_explorations(
+    session: Session, exploration_ids: Iterable[int], *, now: datetime
+) -> None:
+    """Mark running explorations done once none of their tiles is queued or leased."""
+    ids = set(exploration_ids)
+    if not ids:
+        return
+    open_tiles: Any = (
+        select(TileRow.id)
+        .where(TileRow.exploration_id == ExplorationRow.id)
+        .where(TileRow.state.not_in(TERMINAL_TILE_STATES))
+        .exists()
+    )
+    session.execute(
+        update(ExplorationRow)
+        .where(
+            ExplorationRow.id.in_(ids),
+            ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
+            ~open_tiles,
+        )
+        .values(status=ExplorationStatus.DONE, finished_at=now, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )

@@ -1,0 +1,125 @@
+"""What an exploration is, as a user submits it: object, gripper, policy, pose grid, trajectory.
+
+The coordinator stores the spec exactly as submitted and derives its tiles of work from the
+pose grid; workers read the gripper, policy and trajectory from it. Ranges are validated here
+so that a bad spec fails at submission with a message naming the field, not hours later on a
+worker.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+# Names of grippers and policies are resolved by the workers (configs/grippers, policy
+# registry); here they only have to be safe identifiers.
+_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+
+
+class AttitudeSpec(BaseModel):
+    """Which gripper attitudes are tried at every (θ, φ, r) grid point."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    rolls: Literal[1, 2, 4, 8] = Field(
+        default=1, description="number of rolls about the palm normal, evenly spaced over 2π"
+    )
+    tilts: tuple[float, ...] = Field(
+        default=(),
+        max_length=4,
+        description=(
+            "tilt angles of the palm normal off the surface normal, rad; each tilt t adds the "
+            "variants pitch=±t and yaw=±t to every roll"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _tilt_range(self) -> AttitudeSpec:
+        for tilt in self.tilts:
+            if not 0.0 < tilt <= math.pi / 4:
+                raise ValueError(f"tilt {tilt} must be in (0, π/4] rad")
+        if len(set(self.tilts)) != len(self.tilts):
+            raise ValueError("tilts must be distinct")
+        return self
+
+    def attitudes(self) -> list[tuple[float, float, float]]:
+        """Every (roll, pitch, yaw) variant, in a fixed order."""
+        tilt_variants = [(0.0, 0.0)]
+        for t in self.tilts:
+            tilt_variants += [(t, 0.0), (-t, 0.0), (0.0, t), (0.0, -t)]
+        rolls = [k * 2 * math.pi / self.rolls for k in range(self.rolls)]
+        return [(roll, pitch, yaw) for roll in rolls for pitch, yaw in tilt_variants]
+
+
+class PoseGridSpec(BaseModel):
+    """The coarse grid over the pose space: rings of constant θ, r levels, attitudes."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    dtheta: float = Field(
+        default=math.radians(10),
+        ge=0.01,
+        le=math.pi / 2,
+        description="angular step between grid points on the sphere of approach directions, rad",
+    )
+    r_min: float = Field(default=0.0, ge=0.0, le=0.5, description="smallest start gap, m")
+    r_max: float = Field(default=0.05, ge=0.0, le=0.5, description="largest start gap, m")
+    dr: float = Field(default=0.01, ge=0.001, le=0.5, description="step between r levels, m")
+    attitudes: AttitudeSpec = Field(default_factory=AttitudeSpec)
+
+    @model_validator(mode="after")
+    def _r_range(self) -> PoseGridSpec:
+        if self.r_max < self.r_min:
+            raise ValueError(f"r_max ({self.r_max}) must not be below r_min ({self.r_min})")
+        if (self.r_max - self.r_min) / self.dr > 1000:
+            raise ValueError("r range / dr gives more than 1000 r levels")
+        return self
+
+    def r_levels(self) -> list[float]:
+        n = math.floor((self.r_max - self.r_min) / self.dr + 1e-9) + 1
+        return [round(self.r_min + i * self.dr, 9) for i in range(n)]
+
+
+class TrajectorySpec(BaseModel):
+    """What the object is put through once grasped, to tell held grasps from dropped ones."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    kind: Literal["lift", "shake", "lift_shake"] = "lift_shake"
+    duration_s: float = Field(default=2.0, gt=0.0, le=30.0)
+    amplitude_m: float = Field(default=0.05, ge=0.0, le=0.5, description="displacement, m")
+    frequency_hz: float = Field(default=1.0, ge=0.0, le=20.0, description="shake frequency")
+
+
+class RefinementSpec(BaseModel):
+    """How the adaptive pass refines the coarse grid where outcomes change."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    levels: int = Field(default=2, ge=0, le=6, description="halvings of Δθ at boundaries")
+    boundary_only: bool = Field(
+        default=True, description="refine only cells whose neighbours differ in outcome"
+    )
+    max_poses: int = Field(
+        default=200_000, ge=0, le=50_000_000, description="budget of refinement poses"
+    )
+
+
+class ExplorationSpec(BaseModel):
+    """One exploration as submitted: everything needed to reproduce it."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    object_id: int = Field(
+        ge=1, le=2**31 - 1, description="id of an object stored through POST /objects"
+    )
+    gripper: str = Field(pattern=_NAME_PATTERN, description="gripper spec name")
+    policy: str = Field(default="default", pattern=_NAME_PATTERN, description="closing policy")
+    grid: PoseGridSpec = Field(default_factory=PoseGridSpec)
+    trajectory: TrajectorySpec = Field(default_factory=TrajectorySpec)
+    refinement: RefinementSpec = Field(default_factory=RefinementSpec)
+    label: str | None = Field(
+        default=None, max_length=200, pattern=r"^[^\x00]*$", description="free text for humans"
+    )
