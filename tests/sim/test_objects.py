@@ -30,9 +30,11 @@ from graspscape.workers.sim.objects import (
     forget_client,
     list_builtin_objects,
     prepare_object,
+    source_axes_orientation,
     spawn_object,
 )
 from graspscape.workers.sim.objects.catalog import ycb_root
+from graspscape.workers.sim.objects.prepare import INERTIA_ALIGN_THRESHOLD
 
 BUILTINS = ["sphere", "cube", "can", "dumbbell", "mug", "spiked_ball"]
 PYBULLET_DATA = ["pb:mug", "pb:bunny", "pb:duck", "pb:teddy"]
@@ -109,7 +111,7 @@ def test_object_prepares_in_com_frame_and_spawns_with_its_mass(
     assert np.linalg.norm(mesh.center_mass) < 1e-6 * max(1.0, prep.bounding_radius)
     assert 0.02 < prep.bounding_radius < 0.25  # hand-sized objects
     assert len(prep.collision_parts) >= 1 and prep.collision_path.is_file()
-    assert prep.inertia_dropped < 0.05 + 1e-9  # pybullet's diagonal inertia is near exact
+    assert prep.inertia_dropped <= INERTIA_ALIGN_THRESHOLD  # pybullet's diagonal is near exact
 
     body = spawn_object(client, prep, position=(0.3, -0.2, 1.0))
     info = p.getDynamicsInfo(body, -1, physicsClientId=client)
@@ -389,3 +391,25 @@ def test_ycb_mass_and_friction_come_from_its_urdf(prepared: dict[str, PreparedOb
     # The URDF's 1e-3 placeholder inertia is replaced by the mesh's at that mass.
     assert all(1e-4 < v < 1e-2 for v in drill.inertia_diag)
     assert drill.inertia_diag != pytest.approx((1e-3, 1e-3, 1e-3))
+
+
+def test_turned_frame_maps_back_to_the_source_axes(
+    prepared: dict[str, PreparedObject], client: int
+) -> None:
+    """The duck's frame is turned onto its principal axes; spawning with
+    source_axes_orientation shows it as its file has it."""
+    duck = prepared["pb:duck"]
+    assert not np.allclose(duck.object_from_source[:3, :3], np.eye(3))
+    src_hulls = Path(pybullet_data.getDataPath()) / "duck_vhacd.obj"
+    src = trimesh.load(src_hulls, force="mesh")
+    src.apply_scale(0.06)
+    com = np.asarray(duck.com_in_source)
+    body = spawn_object(client, duck, position=com, orientation=source_axes_orientation(duck))
+    # Points of the file's surface, placed where the file has them, lie on the body's surface.
+    probe = p.createCollisionShape(p.GEOM_SPHERE, radius=0.001, physicsClientId=client)
+    for point in src.vertices[:: max(1, len(src.vertices) // 12)]:
+        pb = p.createMultiBody(0, probe, basePosition=point.tolist(), physicsClientId=client)
+        d = min(c[8] for c in p.getClosestPoints(pb, body, 0.05, physicsClientId=client))
+        assert abs(d + 0.001) < 0.002
+        p.removeBody(pb, physicsClientId=client)
+    assert source_axes_orientation(prepared["mug"]) == pytest.approx((0, 0, 0, 1))

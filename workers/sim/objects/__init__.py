@@ -16,7 +16,7 @@ from .errors import (
     ZeroVolume,
 )
 from .prepare import PreparedObject, prepare_object
-from .spawn import forget_client, spawn_object
+from .spawn import forget_client, source_axes_orientation, spawn_object
 
 __all__ = [
     "EmptyMesh",
@@ -32,5 +32,6 @@ __all__ = [
     "forget_client",
     "list_builtin_objects",
     "prepare_object",
+    "source_axes_orientation",
     "spawn_object",
 ]

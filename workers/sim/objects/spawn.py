@@ -12,7 +12,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import pybullet as p
+import trimesh
 
 from .errors import ObjectError
 from .prepare import PreparedObject
@@ -79,3 +81,15 @@ def spawn_object(
         physicsClientId=client_id,
     )
     return body
+
+
+def source_axes_orientation(prepared: PreparedObject) -> tuple[float, float, float, float]:
+    """Body orientation (x, y, z, w) that lines the source file's axes up with the world's.
+
+    Identity unless prepare turned the frame onto principal axes; use it to show, say, a YCB
+    drill standing as its file has it.
+    """
+    rot = np.eye(4)
+    rot[:3, :3] = np.asarray(prepared.object_from_source)[:3, :3].T
+    w, x, y, z = trimesh.transformations.quaternion_from_matrix(rot)
+    return (float(x), float(y), float(z), float(w))
