@@ -32,7 +32,10 @@ class ObjectSpec(BaseModel):
     )
     inertia_diag: tuple[float, float, float] | None = Field(
         default=None,
-        description="principal moments of inertia, kg·m²; default: from the mesh at mass_kg",
+        description=(
+            "moments of inertia about the centre of mass along the object-frame axes, kg·m²; "
+            "default: from the mesh at mass_kg (see docs/objects.md)"
+        ),
     )
     scale: float = Field(default=1.0, gt=0.0, le=100.0, description="uniform mesh scale")
 

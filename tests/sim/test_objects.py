@@ -291,6 +291,15 @@ def test_user_stl_round_trip(tmp_path: Path, cache_dir: Path, client: int) -> No
     assert p.getDynamicsInfo(body, -1, physicsClientId=client)[1] == pytest.approx(0.6)
 
 
+def test_user_glb_round_trip(tmp_path: Path, cache_dir: Path) -> None:
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.03)
+    path = tmp_path / "ball.glb"
+    ball.export(path)
+    prep = prepare_object(ObjectSpec(mesh_path=str(path), mass_kg=0.1), cache_dir)
+    assert prep.decomposition == "convex"
+    assert prep.bounding_radius == pytest.approx(0.03, rel=1e-6)
+
+
 def test_user_concave_obj_is_decomposed_and_keeps_its_notch(
     tmp_path: Path, cache_dir: Path, client: int
 ) -> None:
@@ -413,3 +422,13 @@ def test_turned_frame_maps_back_to_the_source_axes(
         assert abs(d + 0.001) < 0.002
         p.removeBody(pb, physicsClientId=client)
     assert source_axes_orientation(prepared["mug"]) == pytest.approx((0, 0, 0, 1))
+
+
+def test_spawn_recovers_after_reset_simulation(
+    prepared: dict[str, PreparedObject], client: int
+) -> None:
+    spawn_object(client, prepared["mug"])
+    p.resetSimulation(physicsClientId=client)  # drops the cached shapes in pybullet
+    body = spawn_object(client, prepared["mug"])
+    assert p.getNumBodies(physicsClientId=client) == 1
+    assert p.getDynamicsInfo(body, -1, physicsClientId=client)[0] == pytest.approx(0.3)

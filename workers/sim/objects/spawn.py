@@ -60,17 +60,25 @@ def spawn_object(
     Rolling and spinning friction stay at pybullet's default 0: they are contact-patch
     approximations that would add an unmeasured resistance to the object turning in the grasp.
     """
-    col, vis = _shapes(client_id, prepared, rgba)
-    body = p.createMultiBody(
-        baseMass=prepared.mass_kg,
-        baseCollisionShapeIndex=col,
-        baseVisualShapeIndex=vis,
-        basePosition=list(position),
-        baseOrientation=list(orientation),
-        baseInertialFramePosition=[0.0, 0.0, 0.0],
-        baseInertialFrameOrientation=[0.0, 0.0, 0.0, 1.0],
-        physicsClientId=client_id,
-    )
+    body = -1
+    for attempt in range(2):
+        col, vis = _shapes(client_id, prepared, rgba)
+        try:
+            body = p.createMultiBody(
+                baseMass=prepared.mass_kg,
+                baseCollisionShapeIndex=col,
+                baseVisualShapeIndex=vis,
+                basePosition=list(position),
+                baseOrientation=list(orientation),
+                baseInertialFramePosition=[0.0, 0.0, 0.0],
+                baseInertialFrameOrientation=[0.0, 0.0, 0.0, 1.0],
+                physicsClientId=client_id,
+            )
+        except p.error:
+            body = -1
+        if body >= 0 or attempt == 1:
+            break
+        forget_client(client_id)  # cached ids from a reset or reconnected client: rebuild
     if body < 0:
         raise ObjectError(f"{prepared.name}: pybullet could not create the body")
     # createMultiBody derives inertia from the compound's bounding box; set the mesh's.
