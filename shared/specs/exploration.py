@@ -73,8 +73,6 @@ class PoseGridSpec(BaseModel):
     def _r_range(self) -> PoseGridSpec:
         if self.r_max < self.r_min:
             raise ValueError(f"r_max ({self.r_max}) must not be below r_min ({self.r_min})")
-        if (self.r_max - self.r_min) / self.dr > 1000:
-            raise ValueError("r range / dr gives more than 1000 r levels")
         return self
 
     def r_levels(self) -> list[float]:

@@ -93,6 +93,7 @@ def settings(db_url: str, tmp_path: Path) -> Settings:
         max_upload_bytes=64 * 1024,
         shared_objects_dir=tmp_path / "shared",
         requeue_interval_s=3600,
+        max_poses_per_exploration=100_000,
     )
 
 

@@ -19,9 +19,14 @@ from tests.coordinator.test_queue import make_exploration
 
 
 def pose_count(session: Session, exploration_id: int) -> int:
-    return session.scalar(
-        select(func.count()).select_from(PoseRow).where(PoseRow.exploration_id == exploration_id)
-    ) or 0
+    return (
+        session.scalar(
+            select(func.count())
+            .select_from(PoseRow)
+            .where(PoseRow.exploration_id == exploration_id)
+        )
+        or 0
+    )
 
 
 def exploration(session: Session, eid: int) -> ExplorationRow:
@@ -35,8 +40,9 @@ def test_a_tile_batch_is_stored_and_finishes_the_tile(session: Session) -> None:
     eid = make_exploration(session)
     (t,) = lease_tiles(session, worker_id="w1", n=1, lease_seconds=60)
     results = fake_results(t.poses(), seed=1)
-    report = ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
-                            worker_id="w1", results=results)
+    report = ingest_results(
+        session, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w1", results=results
+    )
     assert (report.inserted, report.duplicates, report.tile_moved) == (len(results), 0, True)
     assert report.tile_state == "done"
     assert pose_count(session, eid) == len(results)
@@ -48,8 +54,13 @@ def test_a_tile_batch_is_stored_and_finishes_the_tile(session: Session) -> None:
     for result in results:
         p = by_key[result.pose_key]
         assert (p.theta, p.phi, p.r, p.viable, p.mu_s, p.outcome, p.worker_id) == (
-            result.pose.theta, result.pose.phi, result.pose.r, result.viable, result.mu_s,
-            result.outcome.value, "w1",
+            result.pose.theta,
+            result.pose.phi,
+            result.pose.r,
+            result.viable,
+            result.mu_s,
+            result.outcome.value,
+            "w1",
         )
         if result.signature is not None:
             assert p.signature == result.signature.model_dump(mode="json")
@@ -62,8 +73,9 @@ def test_the_same_batch_twice_leaves_one_row_per_pose(session: Session) -> None:
     (t,) = lease_tiles(session, worker_id="w1", n=1, lease_seconds=60)
     results = fake_results(t.poses())
     ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w1", results=results)
-    again = ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w1",
-                           results=results + results[:3])
+    again = ingest_results(
+        session, tile_id=t.tile_id, lease_epoch=1, worker_id="w1", results=results + results[:3]
+    )
     assert (again.inserted, again.duplicates, again.tile_moved) == (0, len(results) + 3, False)
     assert pose_count(session, eid) == len(results)
     assert exploration(session, eid).poses_done == len(results)
@@ -79,15 +91,18 @@ def test_a_stale_epoch_is_stored_but_does_not_move_the_tile(session: Session) ->
     results = fake_results(old.poses())
     half = len(results) // 2
 
-    late = ingest_results(session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow",
-                          results=results[:half])
+    late = ingest_results(
+        session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow", results=results[:half]
+    )
     assert (late.inserted, late.tile_moved, late.tile_state) == (half, False, "leased")
-    current = ingest_results(session, tile_id=new.tile_id, lease_epoch=2, worker_id="fast",
-                             results=results)
+    current = ingest_results(
+        session, tile_id=new.tile_id, lease_epoch=2, worker_id="fast", results=results
+    )
     assert (current.inserted, current.duplicates) == (len(results) - half, half)
     assert current.tile_moved
-    replay = ingest_results(session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow",
-                            results=results)
+    replay = ingest_results(
+        session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow", results=results
+    )
     assert (replay.inserted, replay.tile_moved, replay.tile_state) == (0, False, "done")
     row = exploration(session, eid)
     assert row.poses_done == len(results) == pose_count(session, eid)
@@ -97,11 +112,13 @@ def test_partial_batches_do_not_finish_the_tile(session: Session) -> None:
     make_exploration(session)
     (t,) = lease_tiles(session, worker_id="w", n=1, lease_seconds=60)
     results = fake_results(t.poses())
-    first = ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w",
-                           results=results[:2], final=False)
+    first = ingest_results(
+        session, tile_id=t.tile_id, lease_epoch=1, worker_id="w", results=results[:2], final=False
+    )
     assert (first.inserted, first.tile_state, first.tile_moved) == (2, "leased", False)
-    last = ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w",
-                          results=results[2:])
+    last = ingest_results(
+        session, tile_id=t.tile_id, lease_epoch=1, worker_id="w", results=results[2:]
+    )
     assert (last.inserted, last.tile_state) == (len(results) - 2, "done")
 
 
@@ -110,8 +127,13 @@ def test_the_last_tile_finishes_the_exploration(session: Session) -> None:
     leased = lease_tiles(session, worker_id="w", n=100, lease_seconds=60)
     for t in leased:
         assert exploration(session, eid).status == "running"
-        ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
-                       results=fake_results(t.poses(), seed=t.tile_id))
+        ingest_results(
+            session,
+            tile_id=t.tile_id,
+            lease_epoch=t.lease_epoch,
+            worker_id="w",
+            results=fake_results(t.poses(), seed=t.tile_id),
+        )
     row = exploration(session, eid)
     assert row.status == "done" and row.finished_at is not None
     assert row.poses_done == row.poses_total
@@ -122,10 +144,13 @@ def test_results_for_a_cancelled_exploration_are_kept(session: Session) -> None:
     (t,) = lease_tiles(session, worker_id="w", n=1, lease_seconds=60)
     cancel_exploration(session, exploration_id=eid)
     results = fake_results(t.poses())
-    report = ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w",
-                            results=results)
+    report = ingest_results(
+        session, tile_id=t.tile_id, lease_epoch=1, worker_id="w", results=results
+    )
     assert (report.inserted, report.tile_state, report.tile_moved) == (
-        len(results), "cancelled", False,
+        len(results),
+        "cancelled",
+        False,
     )
     assert pose_count(session, eid) == len(results)
 
@@ -136,8 +161,7 @@ def test_a_pose_key_that_does_not_match_its_pose_is_refused_whole(session: Sessi
     results = fake_results(t.poses())
     results[-1] = results[-1].model_copy(update={"pose_key": "0.1/0.2/0.3/0/0/0"})
     with pytest.raises(InvalidInput, match="does not match its pose"):
-        ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w",
-                       results=results)
+        ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w", results=results)
     assert pose_count(session, eid) == 0
     assert session.get(TileRow, t.tile_id).state == "leased"  # type: ignore[union-attr]
 

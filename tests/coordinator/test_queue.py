@@ -33,9 +33,7 @@ def make_exploration(session: Session, *, dtheta: float = 0.6, target: int = 20)
     spec = ExplorationSpec(
         object_id=obj.id, gripper="robotiq_3f", grid=PoseGridSpec(dtheta=dtheta, r_max=0.02)
     )
-    return create_exploration(
-        session, spec=spec, tile_target_poses=target, max_poses=10**6
-    ).id
+    return create_exploration(session, spec=spec, tile_target_poses=target, max_poses=10**6).id
 
 
 def tiles(session: Session, exploration_id: int) -> list[TileRow]:
@@ -137,14 +135,28 @@ def test_attempts_are_capped_and_the_tile_fails_with_its_error(session: Session)
 def test_fail_tile_requeues_then_fails_and_ignores_stale_epochs(session: Session) -> None:
     eid = make_exploration(session)
     (t,) = lease_tiles(session, worker_id="w", n=1, lease_seconds=60)
-    assert fail_tile(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
-                     error="pybullet crashed", max_attempts=2) == "queued"
-    assert fail_tile(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
-                     error="again", max_attempts=2) == "queued"  # stale: nothing moves
+    assert (
+        fail_tile(
+            session,
+            tile_id=t.tile_id,
+            lease_epoch=t.lease_epoch,
+            error="pybullet crashed",
+            max_attempts=2,
+        )
+        == "queued"
+    )
+    assert (
+        fail_tile(
+            session, tile_id=t.tile_id, lease_epoch=t.lease_epoch, error="again", max_attempts=2
+        )
+        == "queued"
+    )  # stale: nothing moves
     (t2,) = lease_tiles(session, worker_id="w", n=1, lease_seconds=60)
     assert (t2.tile_id, t2.lease_epoch) == (t.tile_id, 2)
-    assert fail_tile(session, tile_id=t2.tile_id, lease_epoch=2, error="mesh exploded",
-                     max_attempts=2) == "failed"
+    assert (
+        fail_tile(session, tile_id=t2.tile_id, lease_epoch=2, error="mesh exploded", max_attempts=2)
+        == "failed"
+    )
     row = next(r for r in tiles(session, eid) if r.id == t.tile_id)
     assert (row.state, row.last_error, row.attempts) == ("failed", "mesh exploded", 2)
     with pytest.raises(NotFound, match="tile 999999"):

@@ -51,6 +51,9 @@ def validate_mesh(data: bytes, fmt: str, *, scale: float = 1.0) -> MeshInfo:
     vertices = np.asarray(mesh.vertices, dtype=float)
     if not np.isfinite(vertices).all():
         raise InvalidInput("mesh has non-finite vertex coordinates (NaN or infinity)")
+    # Loaded unprocessed so NaNs are seen above; STL repeats vertices per face, merge them so
+    # a closed surface reads as watertight.
+    mesh.merge_vertices()
     extents = tuple(float(e) * scale for e in mesh.extents)
     if min(extents) <= 1e-9:
         raise InvalidInput("mesh is flat: zero extent along one axis, so zero volume")

@@ -1,0 +1,286 @@
+"""Explorations, poses, workers, health and metrics through the real app on both databases."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+from graspscape.services.coordinator.exploration.tiling import count_poses
+from graspscape.services.coordinator.store.ingest import ingest_results
+from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
+from graspscape.services.coordinator.store.queue import lease_tiles
+from graspscape.services.coordinator.store.workers import heartbeat
+from graspscape.shared.specs.exploration import PoseGridSpec
+from sqlalchemy import update
+from sqlalchemy.orm import Session, sessionmaker
+
+from tests.coordinator.helpers import fake_results
+
+SMALL_GRID = {"dtheta": 0.6, "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
+
+
+def submit(client: TestClient, object_id: int, **extra: Any) -> dict[str, Any]:
+    body = {"object_id": object_id, "gripper": "robotiq_3f", "grid": SMALL_GRID, **extra}
+    response = client.post("/explorations", json=body)
+    assert response.status_code == 201, response.text
+    return response.json()
+
+
+def work(sessions: sessionmaker[Session], n_tiles: int, worker: str = "w1") -> list[Any]:
+    """Do what a worker would: lease tiles and report one batch of results per tile."""
+    done = []
+    with sessions() as s:
+        for t in lease_tiles(s, worker_id=worker, n=n_tiles, lease_seconds=60):
+            results = fake_results(t.poses(), seed=t.tile_id)
+            ingest_results(
+                s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id=worker, results=results
+            )
+            done.extend(results)
+    return done
+
+
+def test_submit_get_and_progress(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    created = submit(client, object_id, label="first try")
+    assert created["status"] == "queued"
+    assert created["poses_total"] == count_poses(PoseGridSpec(**SMALL_GRID))
+    eid = created["id"]
+    detail = client.get(f"/explorations/{eid}").json()
+    assert detail["spec"]["gripper"] == "robotiq_3f" and detail["spec"]["label"] == "first try"
+    assert detail["spec"]["grid"]["attitudes"] == {"rolls": 1, "tilts": []}
+    assert detail["progress"]["tiles"]["queued"] == created["tiles_total"]
+    assert detail["progress"]["viable_share"] is None and detail["progress"]["eta_s"] is None
+
+    results = work(sessions, 2)
+    detail = client.get(f"/explorations/{eid}").json()
+    progress = detail["progress"]
+    assert detail["status"] == "running"
+    assert progress["tiles"]["done"] == 2
+    assert progress["tiles"]["queued"] == created["tiles_total"] - 2
+    assert progress["poses_done"] == len(results) == detail["poses_done"]
+    assert progress["viable_share"] == pytest.approx(sum(r.viable for r in results) / len(results))
+    assert progress["throughput_poses_per_s"] == pytest.approx(len(results) / 60.0)
+    remaining = created["poses_total"] - len(results)
+    assert progress["eta_s"] == pytest.approx(remaining / (len(results) / 60.0))
+    assert progress["fraction_done"] == pytest.approx(len(results) / created["poses_total"])
+
+    work(sessions, 10_000)
+    detail = client.get(f"/explorations/{eid}").json()
+    assert detail["status"] == "done" and detail["finished_at"] is not None
+    assert detail["progress"]["fraction_done"] == 1.0 and detail["progress"]["eta_s"] == 0.0
+
+
+def test_list_filters_and_pagination(client: TestClient, object_id: int) -> None:
+    ids = [submit(client, object_id)["id"] for _ in range(5)]
+    assert client.post(f"/explorations/{ids[1]}/cancel").status_code == 200
+    page = client.get("/explorations", params={"limit": 2, "offset": 2}).json()
+    assert page["total"] == 5 and [e["id"] for e in page["items"]] == ids[2:4]
+    cancelled = client.get("/explorations", params={"status": "cancelled"}).json()
+    assert [e["id"] for e in cancelled["items"]] == [ids[1]]
+    queued = client.get("/explorations", params={"status": "queued", "object_id": object_id})
+    assert queued.json()["total"] == 4
+    assert client.get("/explorations", params={"object_id": 999}).json()["total"] == 0
+    assert client.get("/explorations", params={"status": "bogus"}).status_code == 422
+    assert client.get("/explorations", params={"limit": 0}).status_code == 422
+
+
+def _spec(**changes: Any) -> dict[str, Any]:
+    spec: dict[str, Any] = {"object_id": 1, "gripper": "robotiq_3f", "grid": dict(SMALL_GRID)}
+    for path, value in changes.items():
+        target = spec
+        *parents, leaf = path.split("__")
+        for p in parents:
+            target = target.setdefault(p, {})
+        target[leaf] = value
+    return spec
+
+
+@pytest.mark.parametrize(
+    ("spec", "fragment"),
+    [
+        (_spec(object_id=999), "object_id 999 does not exist"),
+        (_spec(object_id=0), "object_id"),
+        (_spec(gripper="bad name!"), "gripper"),
+        (_spec(policy=""), "policy"),
+        (_spec(grid__dtheta=0.001), "dtheta"),
+        (_spec(grid__dtheta=2.0), "dtheta"),
+        (_spec(grid__r_min=0.05, grid__r_max=0.01), "r_max (0.01) must not be below r_min"),
+        (_spec(grid__dr=0), "dr"),
+        (_spec(grid__r_max=0.6), "r_max"),
+        (_spec(grid__attitudes__rolls=3), "rolls"),
+        (_spec(grid__attitudes__tilts=[1.0]), "tilt 1.0 must be in"),
+        (_spec(grid__attitudes__tilts=[0.1, 0.1]), "distinct"),
+        (_spec(trajectory__kind="spin"), "kind"),
+        (_spec(trajectory__duration_s=0), "duration_s"),
+        (_spec(refinement__levels=9), "levels"),
+        (_spec(colour="red"), "colour"),
+        (_spec(grid__dtheta=0.05, grid__attitudes__rolls=8), "more than the limit"),
+        (_spec(label="x" * 201), "label"),
+    ],
+)
+def test_exploration_validation_errors(
+    client: TestClient, object_id: int, spec: dict[str, Any], fragment: str
+) -> None:
+    response = client.post("/explorations", json=spec)
+    assert response.status_code == 422, response.text
+    assert fragment in str(response.json()["detail"])
+    assert client.get("/explorations").json()["total"] == 0
+
+
+def test_malformed_body_is_422(client: TestClient) -> None:
+    response = client.post(
+        "/explorations", content=b"{not json", headers={"content-type": "application/json"}
+    )
+    assert response.status_code == 422
+
+
+def test_cancel_and_delete(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    eid = submit(client, object_id)["id"]
+    results = work(sessions, 1)
+    with sessions() as s:
+        (out,) = lease_tiles(s, worker_id="w2", n=1, lease_seconds=60)
+    cancelled = client.post(f"/explorations/{eid}/cancel")
+    assert cancelled.status_code == 200 and cancelled.json()["status"] == "cancelled"
+    assert client.post(f"/explorations/{eid}/cancel").status_code == 200  # idempotent
+    tiles = client.get(f"/explorations/{eid}").json()["progress"]["tiles"]
+    assert tiles["done"] == 1 and tiles["queued"] == tiles["leased"] == 0
+    with sessions() as s:
+        assert lease_tiles(s, worker_id="w3", n=5, lease_seconds=60) == []
+        # The tile that was out when the exploration was cancelled still delivers its results.
+        late = ingest_results(
+            s,
+            tile_id=out.tile_id,
+            lease_epoch=out.lease_epoch,
+            worker_id="w2",
+            results=fake_results(out.poses()),
+        )
+    assert late.inserted == len(out.poses())
+    poses = client.get(f"/explorations/{eid}/poses", params={"limit": 1000}).json()["items"]
+    assert len(poses) == len(results) + late.inserted
+
+    assert client.delete(f"/explorations/{eid}").status_code == 204
+    assert client.get(f"/explorations/{eid}").status_code == 404
+    assert client.get(f"/explorations/{eid}/poses").status_code == 404
+    assert client.delete(f"/explorations/{eid}").status_code == 404
+    assert client.post(f"/explorations/{eid}/cancel").status_code == 404
+
+
+def test_cancelling_a_done_exploration_is_409(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    eid = submit(client, object_id, grid={**SMALL_GRID, "dtheta": 1.5})["id"]
+    work(sessions, 1000)
+    response = client.post(f"/explorations/{eid}/cancel")
+    assert response.status_code == 409 and "already done" in response.json()["detail"]
+
+
+def test_poses_pagination_and_filters(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    eid = submit(client, object_id)["id"]
+    results = work(sessions, 4)
+    seen: list[dict[str, Any]] = []
+    cursor = None
+    while True:
+        params: dict[str, Any] = {"limit": 7}
+        if cursor is not None:
+            params["cursor"] = cursor
+        page = client.get(f"/explorations/{eid}/poses", params=params).json()
+        assert len(page["items"]) <= 7
+        seen.extend(page["items"])
+        cursor = page["next_cursor"]
+        if cursor is None:
+            break
+    assert len(seen) == len({p["pose_key"] for p in seen}) == len(results)
+    by_key = {r.pose_key: r for r in results}
+    assert all(p["mu_s"] == by_key[p["pose_key"]].mu_s for p in seen)
+
+    def query(**params: Any) -> list[dict[str, Any]]:
+        response = client.get(f"/explorations/{eid}/poses", params={"limit": 1000, **params})
+        assert response.status_code == 200, response.text
+        return response.json()["items"]
+
+    viable = query(viable="true")
+    assert len(viable) == sum(r.viable for r in results) > 0
+    assert all(p["viable"] for p in viable)
+    mid = query(mu_min=0.25, mu_max=0.75)
+    assert {p["pose_key"] for p in mid} == {r.pose_key for r in results if 0.25 <= r.mu_s <= 0.75}
+    box = query(theta_min=0.5, theta_max=1.3, phi_min=0.0, phi_max=math.pi, r_min=0.01, r_max=0.02)
+    assert {p["pose_key"] for p in box} == {
+        r.pose_key
+        for r in results
+        if 0.5 <= r.pose.theta <= 1.3 and 0 <= r.pose.phi <= math.pi and r.pose.r >= 0.01
+    }
+
+    with sessions() as s:
+        manifold = ManifoldRow(exploration_id=eid, label=0, size=3)
+        s.add(manifold)
+        s.flush()
+        keys = [p["pose_key"] for p in viable[:3]]
+        s.execute(update(PoseRow).where(PoseRow.pose_key.in_(keys)).values(manifold_id=manifold.id))
+        s.commit()
+        manifold_id = manifold.id
+    assert sorted(p["pose_key"] for p in query(manifold_id=manifold_id)) == sorted(keys)
+
+
+@pytest.mark.parametrize(
+    ("params", "fragment"),
+    [
+        ({"mu_min": 0.9, "mu_max": 0.1}, "mu_min (0.9) is greater than mu_max (0.1)"),
+        ({"theta_min": 2, "theta_max": 1}, "theta_min"),
+        ({"r_min": 0.5, "r_max": 0.1}, "r_min"),
+        ({"phi_min": 3, "phi_max": 1}, "phi_min"),
+        ({"mu_min": "nan"}, "finite"),
+        ({"theta_max": "inf"}, "finite"),
+        ({"limit": 0}, "limit"),
+        ({"limit": 5000}, "limit"),
+        ({"cursor": -1}, "cursor"),
+        ({"viable": "maybe"}, "viable"),
+    ],
+)
+def test_pose_query_validation_errors(
+    client: TestClient, object_id: int, params: dict[str, Any], fragment: str
+) -> None:
+    eid = submit(client, object_id)["id"]
+    response = client.get(f"/explorations/{eid}/poses", params=params)
+    assert response.status_code == 422, response.text
+    assert fragment in str(response.json()["detail"])
+
+
+def test_workers_are_listed(client: TestClient, sessions: sessionmaker[Session]) -> None:
+    with sessions() as s:
+        heartbeat(s, worker_id="box-1", host="box", capacity=16)
+        heartbeat(s, worker_id="box-2", host="box", capacity=8)
+        heartbeat(s, worker_id="box-1", host="box", capacity=12)
+    body = client.get("/workers").json()
+    assert body["total"] == 2
+    assert {w["id"]: w["capacity"] for w in body["items"]} == {"box-1": 12, "box-2": 8}
+    assert body["items"][0]["id"] == "box-1"  # most recently seen first
+
+
+def test_healthz_and_metrics(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    health = client.get("/healthz")
+    assert health.status_code == 200
+    assert health.json()["status"] == "ok" and health.json()["schema_revision"] is not None
+    eid = submit(client, object_id)["id"]
+    results = work(sessions, 1)
+    client.get(f"/explorations/{eid}")
+    metrics = client.get("/metrics")
+    assert metrics.status_code == 200
+    assert metrics.headers["content-type"].startswith("text/plain")
+    text = metrics.text
+    assert 'graspscape_tiles{state="done"} 1.0' in text
+    assert 'graspscape_explorations{status="running"} 1.0' in text
+    assert f"graspscape_poses_stored {float(len(results))}" in text
+    assert "graspscape_workers_active 1.0" in text
+    assert (
+        'graspscape_http_requests_total{method="GET",'
+        'route="/explorations/{exploration_id}",status="200"} 1.0'
+    ) in text
