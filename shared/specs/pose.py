@@ -24,7 +24,7 @@ class Pose(BaseModel):
     phi: float = Field(description="azimuth about object +z, rad (wrapped to [0, 2π))")
     r: float = Field(ge=0.0, le=1.0, description="start gap palm surface ↔ nearest object point, m")
     roll: float = Field(default=0.0, description="rotation about the palm normal, rad")
-    pitch: float = Field(default=0.0, ge=-math.pi / 2, le=math.pi / 2, description="tilt, rad")
+    pitch: float = Field(default=0.0, ge=-math.pi, le=math.pi, description="tilt, rad")
     yaw: float = Field(default=0.0, ge=-math.pi / 2, le=math.pi / 2, description="tilt, rad")
 
     def key(self) -> str:

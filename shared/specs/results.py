@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-from pydantic import BaseModel, ConfigDict, Field
-
 from graspscape.shared.specs.pose import Pose
+from pydantic import BaseModel, ConfigDict, Field
 
 
 class Outcome(StrEnum):

@@ -1,0 +1,102 @@
+"""Cost and fidelity of one pose evaluation on one core (issue: simulation core).
+
+Evaluates a fixed grid of poses around the mug with the production settings and with a
+reference at 240 Hz and 50 solver iterations (all else equal), and reports evaluations per
+second, the cost of a held grasp, steps and time by phase, and the share of outcomes (viable
+or not, and the same grasp type) on which both agree.
+
+    .venv/bin/python benchmarks/bench_eval_pose.py            # writes results/eval_pose.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+from graspscape.shared.specs.gripper import load_gripper
+from graspscape.shared.specs.objects import ObjectSpec
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import PoseResult
+from graspscape.shared.specs.sim import PhysicsSettings, SimSettings
+from graspscape.workers.sim.evaluate import Evaluator, default_cache_dir
+from graspscape.workers.sim.objects import prepare_object
+from graspscape.workers.sim.signature import same_grasp_type
+
+try:
+    from benchmarks._results import write_results
+except ModuleNotFoundError:  # run as a script from the repo root
+    from _results import write_results
+
+
+def pose_grid() -> list[Pose]:
+    thetas = [0.3, 0.8, 1.3, 1.8, 2.4]
+    phis = [k * math.pi / 3 for k in range(6)]
+    rolls = [0.0, math.pi / 2]
+    return [Pose(theta=t, phi=f, r=0.02, roll=a) for t in thetas for f in phis for a in rolls]
+
+
+def run(obj: ObjectSpec, settings: SimSettings,
+        poses: list[Pose]) -> tuple[list[PoseResult], float]:
+    prepared = prepare_object(obj, default_cache_dir() / "objects")
+    with Evaluator(prepared, load_gripper("robotiq_3f"), settings,
+                   work_dir=default_cache_dir()) as evaluator:
+        evaluator.evaluate(poses[0])  # warm caches outside the timing
+        started = time.perf_counter()
+        results = [evaluator.evaluate(pose) for pose in poses]
+        return results, time.perf_counter() - started
+
+
+def agree(a: PoseResult, b: PoseResult) -> bool:
+    if a.viable != b.viable:
+        return False
+    return not a.viable or same_grasp_type(a.signature, b.signature)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--object", default="pb:mug")
+    parser.add_argument("--no-write", action="store_true")
+    args = parser.parse_args()
+    obj = ObjectSpec(name=args.object)
+    poses = pose_grid()
+    production = SimSettings()
+    reference = production.model_copy(
+        update={"physics": PhysicsSettings(rate_hz=240.0, solver_iterations=50)})
+    prod, prod_wall = run(obj, production, poses)
+    ref, ref_wall = run(obj, reference, poses)
+
+    held = [r for r in prod if r.viable]
+    phase = {k: float(np.sum([getattr(r.phases, k) for r in prod])) for k in
+             ("reset_s", "approach_s", "closing_s", "trajectory_s", "sensitivity_s",
+              "approach_steps", "closing_steps", "trajectory_steps", "sensitivity_steps")}
+    agreement = np.mean([agree(a, b) for a, b in zip(prod, ref, strict=True)])
+    both = [(a, b) for a, b in zip(prod, ref, strict=True) if a.viable and b.viable]
+    figures = {
+        "poses": len(poses),
+        "evals_per_s_per_core": len(poses) / prod_wall,
+        "reference_evals_per_s_per_core": len(poses) / ref_wall,
+        "held_grasp_ms": 1000 * float(np.mean([r.eval_time_s for r in held])) if held else 0.0,
+        "held_share": len(held) / len(poses),
+        "reference_held_share": sum(r.viable for r in ref) / len(poses),
+        "agreement_with_reference_share": float(agreement),
+        "mean_abs_mu_s_difference_where_both_held": float(
+            np.mean([abs(a.mu_s - b.mu_s) for a, b in both])) if both else 0.0,
+        "rate_hz": production.physics.rate_hz,
+        "solver_iterations": production.physics.solver_iterations,
+        **{f"{k}_total" if k.endswith("steps") else f"{k.removesuffix('_s')}_total_s": v
+           for k, v in phase.items()},
+    }
+    outcomes: dict[str, int] = {}
+    for r in prod:
+        outcomes[r.outcome.value] = outcomes.get(r.outcome.value, 0) + 1
+    print("outcomes:", outcomes)
+    if not args.no_write:
+        write_results("eval_pose", figures, {"object": args.object, "outcomes": outcomes})
+    else:
+        print(figures)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,102 @@
+"""Settings of one grasp evaluation: physics, the policy's parameters, the reference
+trajectory, the μs probe and the start-pose rule. JSON-serialisable, part of an exploration
+spec, and the only inputs besides the pose that a result depends on."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class PhysicsSettings(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    rate_hz: float = Field(default=240.0, ge=60.0, le=2000.0)
+    solver_iterations: int = Field(default=50, ge=1, le=500)
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+
+class PlacementSettings(BaseModel):
+    """What happens when the open hand at its start pose would interpenetrate the object."""
+
+    model_config = ConfigDict(frozen=True)
+
+    on_interpenetration: Literal["back_off", "infeasible"] = "back_off"
+    backoff_step_m: float = Field(default=0.005, gt=0.0, le=0.05)
+    max_backoff_m: float = Field(default=0.10, ge=0.0, le=0.5)
+    penetration_tolerance_m: float = Field(default=0.0005, ge=0.0, le=0.01)
+
+
+class BaselinePolicySettings(BaseModel):
+    """G_c: a constant force toward x_c, then a constant closing torque until motion halts."""
+
+    model_config = ConfigDict(frozen=True)
+
+    approach_force_n: float = Field(default=6.0, gt=0.0, le=200.0)
+    approach_speed_cap_m_s: float = Field(
+        default=0.25, gt=0.0, le=2.0, description="an arm's speed limit on the free approach"
+    )
+    approach_overshoot_m: float = Field(
+        default=0.02, ge=0.0, le=0.2, description="travel past the start gap before giving up"
+    )
+    closing_effort: float | None = Field(
+        default=None, gt=0.0, le=100.0, description="N·m (or N); default: the gripper's own"
+    )
+    closing_speed: float = Field(default=6.0, gt=0.0, le=20.0, description="rad/s (or m/s)")
+    hold_effort_factor: float = Field(
+        default=3.0, gt=0.0, le=100.0, description="joints not yet closing hold this × effort"
+    )
+    check_every_steps: int = Field(default=6, ge=1, le=100)
+    stall_tolerance: float = Field(
+        default=0.01, gt=0.0, le=0.5, description="joint change per check that counts as halted"
+    )
+    closing_cap_s: float = Field(default=0.6, gt=0.0, le=5.0)
+
+
+class TrajectorySpec(BaseModel):
+    """The reference task: lift, move sideways and turn, with minimum-jerk timing."""
+
+    model_config = ConfigDict(frozen=True)
+
+    settle_s: float = Field(
+        default=0.1, ge=0.0, le=2.0,
+        description="base held still after release while the grasp takes the object's weight",
+    )
+    duration_s: float = Field(default=1.0, gt=0.05, le=10.0)
+    lift_m: float = Field(default=0.10, ge=-1.0, le=1.0)
+    lateral_m: float = Field(default=0.10, ge=-1.0, le=1.0)
+    turn_rad: float = Field(default=0.6, ge=-3.2, le=3.2, description="about the world z axis")
+    gravity_m_s2: float = Field(default=9.81, ge=0.0, le=50.0)
+    slip_distance_m: float = Field(
+        default=0.03, gt=0.0, le=0.5, description="object displacement in the hand that is a drop"
+    )
+    slip_angle_rad: float = Field(default=1.0, gt=0.0, le=3.2)
+
+
+class MetricSettings(BaseModel):
+    """How μs is measured: see docs/metric.md for why each value."""
+
+    model_config = ConfigDict(frozen=True)
+
+    instants: int = Field(default=4, ge=1, le=50, description="sampled instants along the task")
+    window_steps: int = Field(default=8, ge=1, le=100, description="probe window (the paper's ±ε)")
+    perturbation_m_s2: float = Field(default=10.0, gt=0.0, le=100.0)
+    characteristic_length: Literal["radius_of_gyration"] | float = Field(
+        default="radius_of_gyration",
+        description="length that turns rad/s² into m/s²; default: the object's radius of gyration",
+    )
+
+
+class SimSettings(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    physics: PhysicsSettings = PhysicsSettings()
+    placement: PlacementSettings = PlacementSettings()
+    policy: BaselinePolicySettings = BaselinePolicySettings()
+    trajectory: TrajectorySpec = TrajectorySpec()
+    metric: MetricSettings = MetricSettings()
+    spread_mode: str = "basic"

@@ -1,0 +1,65 @@
+"""Worker-side subcommands: evaluate or picture one pose."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def _pose_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--object", default="sphere",
+                        help="built-in name, pb:<name>, ycb:<Folder>, or a mesh file path")
+    parser.add_argument("--mass", type=float, help="object mass, kg (mesh files)")
+    parser.add_argument("--friction", type=float, help="object friction coefficient")
+    parser.add_argument("--gripper", default="robotiq_3f", help="gripper spec name or TOML path")
+    parser.add_argument("--theta", type=float, required=True, help="polar angle from +z, rad")
+    parser.add_argument("--phi", type=float, required=True, help="azimuth, rad")
+    parser.add_argument("--r", type=float, default=0.02, help="start gap palm ↔ object, m")
+    parser.add_argument("--roll", type=float, default=0.0, help="roll about the palm normal, rad")
+    parser.add_argument("--settings", type=Path, help="JSON file of SimSettings overrides")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks")
+
+
+def _load(args: argparse.Namespace):
+    from graspscape.shared.specs.objects import ObjectSpec
+    from graspscape.shared.specs.pose import Pose
+    from graspscape.shared.specs.sim import SimSettings
+
+    if Path(args.object).suffix:
+        obj = ObjectSpec(mesh_path=args.object, mass_kg=args.mass, friction=args.friction)
+    else:
+        obj = ObjectSpec(name=args.object, mass_kg=args.mass, friction=args.friction)
+    settings = (SimSettings.model_validate_json(args.settings.read_text())
+                if args.settings else SimSettings())
+    pose = Pose(theta=args.theta, phi=args.phi, r=args.r, roll=args.roll)
+    return obj, settings, pose
+
+
+def _eval_pose(args: argparse.Namespace) -> int:
+    from graspscape.workers.sim.evaluate import evaluate_pose
+
+    obj, settings, pose = _load(args)
+    result = evaluate_pose(pose, obj=obj, gripper=args.gripper, settings=settings)
+    print(json.dumps(result.model_dump(mode="json"), indent=2))
+    return 0
+
+
+def _render_pose(args: argparse.Namespace) -> int:
+    from graspscape.workers.sim.evaluate import render_pose
+
+    obj, settings, pose = _load(args)
+    path, result = render_pose(pose, args.out, obj=obj, gripper=args.gripper, settings=settings)
+    print(f"{result.outcome.value}, μs = {result.mu_s:.3f}; picture of the synthesized grasp: "
+          f"{path}")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    ev = subparsers.add_parser("eval-pose", help="simulate one pose and print its result (JSON)")
+    _pose_args(ev)
+    ev.set_defaults(handler=_eval_pose)
+    rp = subparsers.add_parser("render-pose", help="write a PNG of the grasp a pose synthesizes")
+    _pose_args(rp)
+    rp.add_argument("--out", type=Path, default=Path("grasp.png"), help="PNG file to write")
+    rp.set_defaults(handler=_render_pose)

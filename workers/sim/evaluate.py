@@ -1,0 +1,332 @@
+"""evaluate_pose: one initial relative pose in, one scored grasp out.
+
+An Evaluator owns one pybullet client with the object and the gripper loaded once. Every
+evaluation starts by restoring the state saved right after loading (positions, velocities and
+the contact cache), and sets every motor, constraint and gravity it uses, so a result never
+depends on what the client evaluated before. Phases: placement (with back-off from
+interpenetration), approach (policy), closing (policy), release and trajectory with μs probes.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+from graspscape.shared.specs.gripper import GripperSpec, load_gripper
+from graspscape.shared.specs.objects import ObjectSpec
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import (
+    GraspConfiguration,
+    Outcome,
+    PhaseTimes,
+    PoseResult,
+)
+from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.geometry import quat_from_matrix
+from graspscape.workers.sim.gripper.hand import Hand
+from graspscape.workers.sim.metric import mu_s
+from graspscape.workers.sim.objects import (
+    PreparedObject,
+    forget_client,
+    prepare_object,
+    spawn_object,
+)
+from graspscape.workers.sim.placement import place_gripper
+from graspscape.workers.sim.policies import get_policy
+from graspscape.workers.sim.render import render_scene
+from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
+from graspscape.workers.sim.signature import build_signature
+from graspscape.workers.sim.trajectory import reference_pose
+from scipy.spatial.transform import Rotation
+
+DRIVE_MAX_FORCE_N = 2000.0
+FIXTURE_MAX_FORCE_N = 5000.0
+CONTACT_DISTANCE_M = 1e-4
+
+
+@dataclass
+class Scene:
+    """The live simulation an evaluation acts on; policies drive it through these methods."""
+
+    client: int
+    hand: Hand
+    object_body: int
+    drive_constraint: int
+    fixture_constraint: int
+    offset: np.ndarray
+    dt: float
+
+    def drive_to(self, position: np.ndarray, rotation: np.ndarray,
+                 max_force: float = DRIVE_MAX_FORCE_N) -> None:
+        p.changeConstraint(self.drive_constraint, jointChildPivot=position.tolist(),
+                           jointChildFrameOrientation=quat_from_matrix(rotation),
+                           maxForce=max_force, physicsClientId=self.client)
+
+    def step(self) -> None:
+        p.stepSimulation(physicsClientId=self.client)
+
+    def in_contact(self) -> bool:
+        return bool(self.contacts())
+
+    def palm_in_contact(self) -> bool:
+        return any(c[3] == -1 for c in self.contacts())
+
+    def contacts(self) -> list:
+        # pybullet also reports pairs still apart by up to its breaking threshold; only
+        # touching pairs are contacts here.
+        points = p.getContactPoints(self.hand.body, self.object_body, physicsClientId=self.client)
+        return [c for c in points if c[8] <= CONTACT_DISTANCE_M]
+
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        pos, orn = p.getBasePositionAndOrientation(self.object_body, physicsClientId=self.client)
+        return np.array(pos), np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+
+
+class Evaluator:
+    def __init__(self, prepared: PreparedObject, gripper: GripperSpec,
+                 settings: SimSettings | None = None, *, work_dir: Path,
+                 world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        self.settings = settings or SimSettings()
+        self.prepared = prepared
+        self.gripper = gripper
+        self.policy = get_policy("baseline")
+        physics = self.settings.physics
+        cid = p.connect(p.DIRECT)
+        self.client = cid
+        p.setPhysicsEngineParameter(fixedTimeStep=physics.dt,
+                                    numSolverIterations=physics.solver_iterations,
+                                    deterministicOverlappingPairs=1, physicsClientId=cid)
+        offset = np.array(world_offset, dtype=float)
+        object_body = spawn_object(cid, prepared, tuple(offset))
+        hand = Hand(cid, gripper, work_dir / "urdf")
+        fixture = p.createConstraint(object_body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0],
+                                     [0, 0, 0], offset.tolist(), physicsClientId=cid)
+        park = offset + np.array([0.0, 0.0, 2.0])
+        com, orn = hand.com_pose_for(park, np.eye(3))
+        p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=cid)
+        drive = p.createConstraint(hand.body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0],
+                                   (-hand.base_inertial_offset).tolist(), park.tolist(),
+                                   physicsClientId=cid)
+        self.scene = Scene(client=cid, hand=hand, object_body=object_body,
+                           drive_constraint=drive, fixture_constraint=fixture, offset=offset,
+                           dt=physics.dt)
+        inertia = np.array(prepared.inertia_diag, dtype=float)
+        metric = self.settings.metric
+        if metric.characteristic_length == "radius_of_gyration":
+            self.length = float(np.sqrt(inertia.mean() / prepared.mass_kg))
+        else:
+            self.length = float(metric.characteristic_length)
+        self.spread = gripper.spread_modes.get(self.settings.spread_mode, 0.0)
+        self.pristine = p.saveState(physicsClientId=cid)
+
+    def close(self) -> None:
+        if p.isConnected(self.client):
+            p.disconnect(self.client)
+            forget_client(self.client)
+
+    def __enter__(self) -> Evaluator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- phases --------------------------------------------------------------------------
+    def _reset(self) -> None:
+        scene, cid = self.scene, self.client
+        p.restoreState(self.pristine, physicsClientId=cid)
+        p.setGravity(0, 0, 0, physicsClientId=cid)
+        policy = self.settings.policy
+        effort = policy.closing_effort or self.gripper.closing_effort
+        scene.hand.reset_open(self.spread, effort, policy.hold_effort_factor)
+        p.changeConstraint(scene.fixture_constraint, jointChildPivot=scene.offset.tolist(),
+                           maxForce=FIXTURE_MAX_FORCE_N, physicsClientId=cid)
+
+    def _penetrating(self) -> bool:
+        tolerance = self.settings.placement.penetration_tolerance_m
+        points = p.getClosestPoints(self.scene.hand.body, self.scene.object_body,
+                                    distance=0.0, physicsClientId=self.client)
+        return any(pt[8] < -tolerance for pt in points)
+
+    def _place(self, position: np.ndarray, rotation: np.ndarray) -> None:
+        hand = self.scene.hand
+        com, orn = hand.com_pose_for(position, rotation)
+        p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=self.client)
+        p.resetBaseVelocity(hand.body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        self.scene.drive_to(position, rotation)
+        # Contact queries report the last collision pass; refresh it for the new placement.
+        p.performCollisionDetection(physicsClientId=self.client)
+
+    def _start_pose(self, pose: Pose) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+        """World start pose of the gripper frame, the target x_c and the effective r."""
+        placement = place_gripper(self.prepared.mesh, pose)
+        settings = self.settings.placement
+        position = self.scene.offset + placement.position
+        gap = placement.gap
+        backed = 0.0
+        while True:
+            self._place(position, placement.rotation)
+            if not self._penetrating():
+                break
+            if settings.on_interpenetration == "infeasible" or backed >= settings.max_backoff_m:
+                return None
+            position = position + placement.surface_normal * settings.backoff_step_m
+            backed += settings.backoff_step_m
+            gap += settings.backoff_step_m
+        return position, placement.rotation, self.scene.offset + placement.nearest_point, gap
+
+    def evaluate(self, pose: Pose, *, picture: Path | None = None) -> PoseResult:
+        """Simulates one pose. With `picture`, a PNG of the synthesized grasp (before the
+        trajectory) is written there."""
+        started = time.perf_counter()
+        phases = PhaseTimes()
+        self._reset()
+        start = self._start_pose(pose)
+        phases.reset_s = time.perf_counter() - started
+        result = dict(pose=pose, pose_key=pose.key(), phases=phases)
+        if start is None:
+            return self._finish(started, Outcome.INFEASIBLE, result)
+        position, rotation, target, gap = start
+        result["effective_r"] = gap
+
+        outcome = self.policy.synthesize(self.scene, position, rotation, target,
+                                         self.settings.policy, phases)
+        if outcome is not None:
+            return self._finish(started, outcome, result)
+
+        hand, scene = self.scene.hand, self.scene
+        obj_pos, obj_rot = scene.object_pose()
+        base_pos, base_rot = hand.frame_pose()
+        rel_rot = obj_rot.T @ base_rot
+        raw = [(hand.link_names[c[3]], tuple((obj_rot.T @ (np.array(c[6]) - obj_pos)).tolist()),
+                c[9]) for c in scene.contacts()]
+        angles = hand.joint_angles()
+        result["grasp"] = GraspConfiguration(
+            base_position=tuple((obj_rot.T @ (base_pos - obj_pos)).tolist()),
+            base_orientation=tuple(quat_from_matrix(rel_rot)),
+            joint_angles=angles,
+        )
+        result["signature"] = build_signature(raw, angles)
+        counts: dict[str, int] = {}
+        for link, _, _ in raw:
+            counts[link] = counts.get(link, 0) + 1
+        result["contacts_per_link"] = counts
+
+        if picture is not None:
+            render_scene(self.client, obj_pos, picture)
+        held, qualities, effort = self._run_trajectory(phases)
+        result["effort_max_nm"] = effort
+        if not held:
+            return self._finish(started, Outcome.DROPPED, result)
+        result["mu_s"] = mu_s(qualities)
+        result["viable"] = True
+        return self._finish(started, Outcome.HELD, result)
+
+    def _run_trajectory(self, phases: PhaseTimes) -> tuple[bool, list[float], float]:
+        scene, hand, cid = self.scene, self.scene.hand, self.client
+        spec, metric = self.settings.trajectory, self.settings.metric
+        t0 = time.perf_counter()
+        p.changeConstraint(scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
+        p.setGravity(0, 0, -spec.gravity_m_s2, physicsClientId=cid)
+        start_pos, start_rot = hand.frame_pose()
+        obj_pos, obj_rot = scene.object_pose()
+        rel_pos0 = start_rot.T @ (obj_pos - start_pos)
+        rel_rot0 = start_rot.T @ obj_rot
+        dt = scene.dt
+        scene.drive_to(start_pos, start_rot)
+        for _ in range(round(spec.settle_s / dt)):
+            scene.step()
+            phases.trajectory_steps += 1
+        pivot = scene.object_pose()[0]
+        n_steps = max(1, round(spec.duration_s / dt))
+        instants = {min(n_steps - 1, int((k + 0.5) * n_steps / metric.instants))
+                    for k in range(metric.instants)}
+
+        def target(step: int) -> tuple[np.ndarray, np.ndarray]:
+            return reference_pose(spec, start_pos, start_rot, pivot, step * dt)
+
+        ctx = ProbeContext(client=cid, hand_body=hand.body, object_body=scene.object_body,
+                           drive=scene.drive_to, target=target)
+
+        def slipped() -> bool:
+            pos, rot = hand.frame_pose()
+            o_pos, o_rot = scene.object_pose()
+            moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
+            turned = Rotation.from_matrix((rot.T @ o_rot) @ rel_rot0.T).magnitude()
+            return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
+
+        qualities: list[float] = []
+        effort = 0.0
+        probe_time = 0.0
+        held = not slipped()
+        for step in range(n_steps if held else 0):
+            if step in instants:
+                tp = time.perf_counter()
+                qualities.append(probe_instant(ctx, step, metric.window_steps, dt,
+                                               metric.perturbation_m_s2, self.length))
+                probe_time += time.perf_counter() - tp
+                phases.sensitivity_steps += 7 * metric.window_steps
+            position, rotation = target(step + 1)
+            scene.drive_to(position, rotation)
+            scene.step()
+            phases.trajectory_steps += 1
+            effort = max(effort, hand.max_finger_torque())
+            if step % 10 == 9 and slipped():
+                held = False
+                break
+        if held and (slipped() or not scene.in_contact()):
+            held = False
+        phases.sensitivity_s += probe_time
+        phases.trajectory_s += time.perf_counter() - t0 - probe_time
+        return held, qualities, effort
+
+    def _finish(self, started: float, outcome: Outcome, result: dict) -> PoseResult:
+        result.setdefault("mu_s", 0.0)
+        result.setdefault("viable", False)
+        result["outcome"] = outcome
+        result["eval_time_s"] = time.perf_counter() - started
+        return PoseResult(**result)
+
+
+def default_cache_dir() -> Path:
+    return Path(os.environ.get("GRASPSCAPE_CACHE_DIR", Path.home() / ".cache" / "graspscape"))
+
+
+_EVALUATORS: dict[tuple[str, str, str], Evaluator] = {}
+
+
+def _evaluator(obj: ObjectSpec, gripper: GripperSpec | str, settings: SimSettings | None,
+               cache_dir: Path | None) -> Evaluator:
+    spec = load_gripper(gripper) if isinstance(gripper, str) else gripper
+    settings = settings or SimSettings()
+    cache = cache_dir or default_cache_dir()
+    key = (obj.model_dump_json(), spec.model_dump_json(), settings.model_dump_json())
+    evaluator = _EVALUATORS.get(key)
+    if evaluator is None:
+        prepared = prepare_object(obj, cache / "objects")
+        evaluator = Evaluator(prepared, spec, settings, work_dir=cache)
+        _EVALUATORS[key] = evaluator
+    return evaluator
+
+
+def evaluate_pose(pose: Pose, *, obj: ObjectSpec, gripper: GripperSpec | str = "robotiq_3f",
+                  settings: SimSettings | None = None,
+                  cache_dir: Path | None = None) -> PoseResult:
+    """Evaluates one pose, reusing this process's evaluator for the same object, gripper and
+    settings (one pybullet client each, loaded once)."""
+    return _evaluator(obj, gripper, settings, cache_dir).evaluate(pose)
+
+
+def render_pose(pose: Pose, path: Path, *, obj: ObjectSpec,
+                gripper: GripperSpec | str = "robotiq_3f", settings: SimSettings | None = None,
+                cache_dir: Path | None = None) -> tuple[Path, PoseResult]:
+    """Evaluates one pose and writes a picture of its synthesized grasp (or of the start pose
+    where no grasp formed)."""
+    evaluator = _evaluator(obj, gripper, settings, cache_dir)
+    result = evaluator.evaluate(pose, picture=path)
+    if not path.exists():
+        render_scene(evaluator.client, evaluator.scene.offset, path)
+    return path, result

@@ -1,0 +1,156 @@
+"""The gripper as a pybullet body, and the under-actuated closing of its fingers.
+
+Under-actuation, approximated: each finger has one actuator. Its phalanges close in sequence:
+a phalanx that is not yet closing is held at its angle by a stiff position motor (the locked
+linkage); the first phalanx closes under a force-capped velocity motor (so it pushes with the
+finger's closing effort once blocked, and never overshoots a limit, which pure torque control
+does on such light links); when a closing phalanx halts (blocked by the object, or at its
+limit), the next one starts closing too, and the blocked ones keep pushing. A finger whose
+phalanges have all halted is done. See docs/gripper.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+from graspscape.shared.specs.gripper import GripperSpec
+from graspscape.workers.sim.geometry import quat_from_matrix
+from graspscape.workers.sim.gripper.urdf import write_gripper_urdf
+
+
+@dataclass
+class FingerJoints:
+    name: str
+    spread_joint: int | None
+    spread_sign: float
+    joints: list[int]
+    open_values: list[float]
+    uppers: list[float]
+    shares: list[float]
+    active: int = 0  # how many phalanges are closing
+    last: list[float] = field(default_factory=list)
+
+
+class Hand:
+    def __init__(self, client: int, spec: GripperSpec, urdf_dir: Path) -> None:
+        self.client = client
+        self.spec = spec
+        path = write_gripper_urdf(spec, urdf_dir)
+        self.body = p.loadURDF(str(path), basePosition=[0, 0, 5], useFixedBase=False,
+                               flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
+        self.link_names: dict[int, str] = {-1: "palm"}
+        joint_by_name: dict[str, int] = {}
+        for j in range(p.getNumJoints(self.body, physicsClientId=client)):
+            info = p.getJointInfo(self.body, j, physicsClientId=client)
+            self.link_names[j] = info[12].decode()
+            joint_by_name[info[1].decode()] = j
+        self.joint_by_name = joint_by_name
+        self.movable = [j for j in joint_by_name.values()
+                        if p.getJointInfo(self.body, j, physicsClientId=client)[2] != p.JOINT_FIXED]
+        self.fingers: list[FingerJoints] = []
+        for finger in spec.fingers:
+            self.fingers.append(FingerJoints(
+                name=finger.name,
+                spread_joint=joint_by_name.get(f"{finger.name}_spread_joint"),
+                spread_sign=finger.spread_sign,
+                joints=[joint_by_name[f"{finger.name}_{ph.name}_joint"] for ph in finger.phalanges],
+                open_values=[ph.open for ph in finger.phalanges],
+                uppers=[ph.upper for ph in finger.phalanges],
+                shares=[ph.torque_share for ph in finger.phalanges],
+            ))
+        self.finger_joints = [j for f in self.fingers for j in f.joints]
+        self.mass = sum(p.getDynamicsInfo(self.body, link, physicsClientId=client)[0]
+                        for link in self.link_names)
+        # pybullet reports the base pose as the palm's centre-of-mass frame; the gripper frame
+        # (palm surface centre) sits at this offset from it.
+        self.base_inertial_offset = np.array(
+            p.getDynamicsInfo(self.body, -1, physicsClientId=client)[3])
+        # The trap: default velocity motors lock every joint until switched off.
+        p.setJointMotorControlArray(self.body, self.movable, p.VELOCITY_CONTROL,
+                                    forces=[0.0] * len(self.movable), physicsClientId=client)
+        self.effort = spec.closing_effort
+        self.hold_factor = 3.0
+
+    # --- poses -------------------------------------------------------------------------
+    def com_pose_for(self, frame_pos: np.ndarray, frame_rot: np.ndarray) -> tuple[list, list]:
+        """The base COM pose that puts the gripper frame (palm surface centre) at a pose."""
+        com = frame_pos + frame_rot @ self.base_inertial_offset
+        return com.tolist(), quat_from_matrix(frame_rot)
+
+    def frame_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        rot = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+        return np.array(pos) - rot @ self.base_inertial_offset, rot
+
+    # --- joints ------------------------------------------------------------------------
+    def reset_open(self, spread: float, effort: float, hold_factor: float) -> None:
+        self.effort, self.hold_factor = effort, hold_factor
+        cid = self.client
+        for finger in self.fingers:
+            for j, q in zip(finger.joints, finger.open_values, strict=True):
+                p.resetJointState(self.body, j, q, 0.0, physicsClientId=cid)
+            finger.active = 0
+            finger.last = list(finger.open_values)
+            if finger.spread_joint is not None:
+                angle = finger.spread_sign * spread
+                p.resetJointState(self.body, finger.spread_joint, angle, 0.0, physicsClientId=cid)
+                p.setJointMotorControl2(self.body, finger.spread_joint, p.POSITION_CONTROL,
+                                        targetPosition=angle, force=10 * effort,
+                                        physicsClientId=cid)
+        self._hold(self.finger_joints, [q for f in self.fingers for q in f.open_values])
+
+    def _hold(self, joints: list[int], targets: list[float]) -> None:
+        if joints:
+            p.setJointMotorControlArray(self.body, joints, p.POSITION_CONTROL,
+                                        targetPositions=targets,
+                                        forces=[self.hold_factor * self.effort] * len(joints),
+                                        physicsClientId=self.client)
+
+    def _close(self, finger: FingerJoints, k: int, speed: float) -> None:
+        p.setJointMotorControl2(self.body, finger.joints[k], p.VELOCITY_CONTROL,
+                                targetVelocity=speed, force=self.effort * finger.shares[k],
+                                physicsClientId=self.client)
+
+    def begin_closing(self, speed: float) -> None:
+        self.speed = speed
+        for finger in self.fingers:
+            finger.active = 1
+            finger.last = self.finger_angles(finger)
+            self._close(finger, 0, speed)
+
+    def finger_angles(self, finger: FingerJoints) -> list[float]:
+        states = p.getJointStates(self.body, finger.joints, physicsClientId=self.client)
+        return [s[0] for s in states]
+
+    def update_closing(self, stall_tolerance: float) -> bool:
+        """Advances each finger's closing sequence; True once every phalanx has halted."""
+        all_done = True
+        for finger in self.fingers:
+            angles = self.finger_angles(finger)
+            moved = [abs(a - b) for a, b in zip(angles, finger.last, strict=True)]
+            finger.last = angles
+            k = finger.active - 1
+            halted = moved[k] < stall_tolerance or angles[k] >= finger.uppers[k] - 1e-3
+            if halted and finger.active < len(finger.joints):
+                self._close(finger, finger.active, self.speed)
+                finger.active += 1
+                all_done = False
+            elif (finger.active < len(finger.joints)
+                  or max(moved[: finger.active]) >= stall_tolerance):
+                all_done = False
+        return all_done
+
+    def joint_angles(self) -> dict[str, float]:
+        joints = sorted(self.joint_by_name.items(), key=lambda kv: kv[1])
+        movable = [(name, j) for name, j in joints if j in self.movable]
+        states = p.getJointStates(self.body, [j for _, j in movable], physicsClientId=self.client)
+        return {name.removesuffix("_joint"): float(s[0])
+                for (name, _), s in zip(movable, states, strict=True)}
+
+    def max_finger_torque(self) -> float:
+        states = p.getJointStates(self.body, self.finger_joints, physicsClientId=self.client)
+        return max(abs(s[3]) for s in states)
+
