@@ -54,7 +54,7 @@ def test_object_welded_to_the_palm_gives_mu_s_near_one(probe_evaluator):
     scene = _held_scene(sphere_evaluator, Pose(theta=1.0, phi=0.5, r=0.02))
     cid = scene.client
     obj_pos, _ = scene.object_pose()
-    frame_pos, frame_rot = scene.hand.frame_pose()
+    _, frame_rot = scene.hand.frame_pose()
     com = np.array(p.getBasePositionAndOrientation(scene.hand.body, physicsClientId=cid)[0])
     inv = frame_rot.T
     weld = p.createConstraint(scene.hand.body, -1, scene.object_body, -1, p.JOINT_FIXED,

@@ -1,0 +1,67 @@
+"""How μs depends on how it is measured: halve each measurement choice and compare.
+
+For a fixed set of held grasps (sphere and mug), μs is computed with the default metric
+settings and with each of instants, window, perturbation size and characteristic length halved.
+Reports, per variant, the mean |Δμs| and the Spearman rank correlation with the default.
+
+    .venv/bin/python benchmarks/bench_metric_stability.py   # writes results/metric_stability.json
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from graspscape.shared.specs.objects import ObjectSpec
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.sim import MetricSettings, SimSettings
+from graspscape.workers.sim.evaluate import evaluate_pose
+from scipy.stats import spearmanr
+
+try:
+    from benchmarks._results import write_results
+except ModuleNotFoundError:
+    from _results import write_results
+
+POSES = {
+    "sphere": [Pose(theta=t, phi=f, r=0.02) for t in (0.0, 0.8, 1.57, 2.3, 3.1)
+               for f in (0.0, 2.0)],
+    "mug": [Pose(theta=t, phi=f, r=0.02, roll=math.pi / 2) for t in (1.2, 1.57, 2.0)
+            for f in (0.0, 1.5, 3.14, 4.7)],
+}
+
+
+def mu_values(metric: MetricSettings) -> list[float]:
+    settings = SimSettings(metric=metric)
+    return [evaluate_pose(pose, obj=ObjectSpec(name=name), settings=settings).mu_s
+            for name, poses in POSES.items() for pose in poses]
+
+
+def main() -> None:
+    base = MetricSettings()
+    length = {"sphere": math.sqrt(0.4) * 0.04}
+    variants = {
+        "instants": base.model_copy(update={"instants": max(1, base.instants // 2)}),
+        "window": base.model_copy(update={"window_steps": max(1, base.window_steps // 2)}),
+        "perturbation": base.model_copy(
+            update={"perturbation_m_s2": base.perturbation_m_s2 / 2}),
+        # Halving the radius of gyration of each object is the same as a fixed length only
+        # per object; a fixed 1.3 cm (half the sphere's) is used for all.
+        "length": base.model_copy(update={"characteristic_length": length["sphere"] / 2}),
+    }
+    reference = np.array(mu_values(base))
+    held = reference > 0
+    figures: dict[str, float] = {"grasps": float(len(reference)),
+                                 "held_grasps": float(held.sum()),
+                                 "mean_mu_s_default": float(reference[held].mean())}
+    for name, metric in variants.items():
+        values = np.array(mu_values(metric))
+        figures[f"mean_abs_mu_s_change_halved_{name}"] = float(
+            np.abs(values - reference)[held].mean())
+        figures[f"rank_correlation_halved_{name}"] = float(
+            spearmanr(values[held], reference[held]).statistic)
+    write_results("metric_stability", figures)
+
+
+if __name__ == "__main__":
+    main()
