@@ -169,3 +169,18 @@ def test_a_pose_key_that_does_not_match_its_pose_is_refused_whole(session: Sessi
 def test_an_unknown_tile_is_refused(session: Session) -> None:
     with pytest.raises(NotFound, match="tile 424242"):
         ingest_results(session, tile_id=424242, lease_epoch=1, worker_id="w", results=[])
+
+
+def test_a_batch_with_every_optional_field_empty(session: Session) -> None:
+    eid = make_exploration(session)
+    (t,) = lease_tiles(session, worker_id="w", n=1, lease_seconds=60)
+    bare = [
+        r.model_copy(
+            update={"effective_r": None, "signature": None, "grasp": None, "contacts_per_link": {}}
+        )
+        for r in fake_results(t.poses())
+    ]
+    report = ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w", results=bare)
+    assert report.inserted == len(bare)
+    stored = session.scalars(select(PoseRow).where(PoseRow.exploration_id == eid)).all()
+    assert all(p.signature is None and p.grasp is None and p.effective_r is None for p in stored)

@@ -10,13 +10,14 @@ exploration): computed poses are never thrown away.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.store.base import utcnow
-from graspscape.services.coordinator.store.dialect import insert_for
+from graspscape.services.coordinator.store.dialect import insert_for, is_postgres
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
     PoseRow,
@@ -59,11 +60,69 @@ def _row(
         "contacts_per_link": result.contacts_per_link or None,
         "signature": result.signature.model_dump(mode="json") if result.signature else None,
         "grasp": result.grasp.model_dump(mode="json") if result.grasp else None,
-        "manifold_id": None,
         "worker_id": worker_id,
         "eval_time_s": result.eval_time_s,
         "created_at": now,
     }
+
+
+_PER_POSE = (
+    ("pose_key", "varchar"),
+    ("theta", "float8"),
+    ("phi", "float8"),
+    ("r", "float8"),
+    ("roll", "float8"),
+    ("pitch", "float8"),
+    ("yaw", "float8"),
+    ("outcome", "varchar"),
+    ("viable", "boolean"),
+    ("mu_s", "float8"),
+    ("effective_r", "float8"),
+    ("effort_max_nm", "float8"),
+    ("contacts_per_link", "text"),
+    ("signature", "text"),
+    ("grasp", "text"),
+    ("eval_time_s", "float8"),
+)
+_JSON_COLUMNS = ("contacts_per_link", "signature", "grasp")
+_PER_BATCH = ("exploration_id", "tile_id", "worker_id", "created_at")
+_PG_INSERT = (
+    "INSERT INTO poses ({columns}) SELECT {batch}, {select} FROM unnest({arrays}) AS u({names}) "
+    "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"
+).format(
+    columns=", ".join(_PER_BATCH + tuple(name for name, _ in _PER_POSE)),
+    batch=", ".join(f"%({name})s" for name in _PER_BATCH),
+    select=", ".join(
+        f"u.{name}::json" if name in _JSON_COLUMNS else f"u.{name}" for name, _ in _PER_POSE
+    ),
+    # %(...)b: binary parameters, which psycopg dumps without escaping each array element.
+    arrays=", ".join(f"%({name})b::{sql_type}[]" for name, sql_type in _PER_POSE),
+    names=", ".join(name for name, _ in _PER_POSE),
+)
+
+
+def _insert_new(session: Session, rows: list[dict[str, Any]]) -> list[bool]:
+    """Insert the rows not stored yet; return the `viable` flag of each row inserted."""
+    if is_postgres(session):
+        # One short statement with a column array each: psycopg parses and prepares it once.
+        # A multi-row VALUES statement has thousands of placeholders that psycopg re-parses
+        # on every batch, which took half of the ingest time.
+        first = rows[0]
+        params: dict[str, Any] = {name: first[name] for name in _PER_BATCH}
+        for name, _ in _PER_POSE:
+            column = [row[name] for row in rows]
+            if name in _JSON_COLUMNS:
+                column = [None if v is None else json.dumps(v) for v in column]
+            params[name] = column
+        result = session.connection().exec_driver_sql(_PG_INSERT, params)
+        return [bool(v) for (v,) in result]
+    table = PoseRow.__table__
+    stmt = (
+        insert_for(session, table)
+        .on_conflict_do_nothing(index_elements=[table.c.exploration_id, table.c.pose_key])
+        .returning(table.c.viable)
+    )
+    return [bool(v) for (v,) in session.connection().execute(stmt, rows)]
 
 
 def ingest_results(
@@ -104,15 +163,9 @@ def ingest_results(
 
     inserted = viable = 0
     if rows:
-        table = PoseRow.__table__
-        stmt = (
-            insert_for(session, table)
-            .on_conflict_do_nothing(index_elements=[table.c.exploration_id, table.c.pose_key])
-            .returning(table.c.viable)
-        )
-        returned = session.connection().execute(stmt, list(rows.values())).all()
+        returned = _insert_new(session, list(rows.values()))
         inserted = len(returned)
-        viable = sum(1 for (v,) in returned if v)
+        viable = sum(1 for v in returned if v)
         if inserted:
             session.execute(
                 update(ExplorationRow)
