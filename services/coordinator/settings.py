@@ -12,7 +12,7 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -47,6 +47,13 @@ class Settings(BaseSettings):
     tile_target_poses: int = Field(default=100, ge=1, le=10_000, description="poses per tile")
     max_poses_per_exploration: int = Field(default=5_000_000, ge=1)
     throughput_window_s: float = Field(default=60.0, gt=0, description="window of poses/s")
+
+    @field_validator("api_token", "database_url", "shared_objects_dir", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        # `GRASPSCAPE_API_TOKEN=` (as compose passes an unset variable) means no token, not
+        # the empty token.
+        return None if value == "" else value
 
     @classmethod
     def settings_customise_sources(

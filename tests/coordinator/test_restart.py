@@ -14,6 +14,8 @@ from pathlib import Path
 
 import httpx
 import pytest
+from fastapi.testclient import TestClient
+from graspscape.services.coordinator.app import create_app
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.queue import lease_tiles
@@ -131,3 +133,27 @@ def test_restart_keeps_explorations_and_requeues_expired_leases(
     assert (tiles["done"], tiles["leased"], tiles["queued"]) == (1, 2, total - 3)
     assert after[ids[0]]["poses_done"] == report.inserted > 0
     assert after[ids[1]]["progress"]["tiles"]["queued"] == after[ids[1]]["tiles_total"]
+
+
+def test_the_running_app_sweeps_expired_leases(
+    settings,
+    sessions: sessionmaker[Session],  # type: ignore[no-untyped-def]
+) -> None:
+
+    fast = settings.model_copy(update={"requeue_interval_s": 0.1})
+    with TestClient(create_app(fast)) as client:
+        object_id = client.post("/objects", data={"name": "cube"}).json()["id"]
+        eid = client.post(
+            "/explorations", json={"object_id": object_id, "gripper": "g", "grid": {"dtheta": 1.0}}
+        ).json()["id"]
+        with sessions() as s:
+            lease_tiles(s, worker_id="w", n=2, lease_seconds=0.3)
+        assert client.get(f"/explorations/{eid}").json()["progress"]["tiles"]["leased"] == 2
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            tiles = client.get(f"/explorations/{eid}").json()["progress"]["tiles"]
+            if tiles["leased"] == 0:
+                break
+            time.sleep(0.1)
+        total = client.get(f"/explorations/{eid}").json()["tiles_total"]
+        assert (tiles["leased"], tiles["queued"]) == (0, total)

@@ -1,0 +1,25 @@
+# The graspscape image: the coordinator (and, with the dispatch issue, the workers).
+# Copies only what the package needs, so a local .venv or data folder never enters the image.
+FROM python:3.11-slim-bookworm
+
+# pybullet builds from source on some platforms; it needs a C++ compiler there.
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends build-essential \
+    && rm -rf /var/lib/apt/lists/*
+
+WORKDIR /app
+COPY pyproject.toml setup.py README.md alembic.ini ./
+COPY shared shared
+COPY workers workers
+COPY services services
+COPY migrations migrations
+COPY configs configs
+# Editable, so the coordinator finds migrations/ and alembic.ini next to the package sources.
+RUN pip install --no-cache-dir -e .
+
+ENV GRASPSCAPE_DATA_DIR=/data \
+    GRASPSCAPE_HOST=0.0.0.0 \
+    GRASPSCAPE_PORT=8000
+VOLUME ["/data"]
+EXPOSE 8000
+CMD ["graspscape", "serve"]
