@@ -54,24 +54,44 @@ def agree(a: PoseResult, b: PoseResult) -> bool:
     return not a.viable or same_grasp_type(a.signature, b.signature)
 
 
+def share_agreeing(a: list[PoseResult], b: list[PoseResult]) -> float:
+    return float(np.mean([agree(x, y) for x, y in zip(a, b, strict=True)]))
+
+
+def with_iterations(settings: SimSettings, iterations: int) -> SimSettings:
+    physics = settings.physics.model_copy(update={"solver_iterations": iterations})
+    return settings.model_copy(update={"physics": physics})
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--object", default="pb:mug")
     parser.add_argument("--no-write", action="store_true")
+    parser.add_argument("--rate-hz", type=float, help="production physics rate (default: the "
+                        "SimSettings default)")
+    parser.add_argument("--iterations", type=int, help="production solver iterations")
     args = parser.parse_args()
     obj = ObjectSpec(name=args.object)
     poses = pose_grid()
     production = SimSettings()
+    if args.rate_hz or args.iterations:
+        physics = production.physics.model_copy(update={
+            k: v for k, v in (("rate_hz", args.rate_hz), ("solver_iterations", args.iterations))
+            if v is not None})
+        production = production.model_copy(update={"physics": physics})
     reference = production.model_copy(
         update={"physics": PhysicsSettings(rate_hz=240.0, solver_iterations=50)})
     prod, prod_wall = run(obj, production, poses)
-    ref, ref_wall = run(obj, reference, poses)
+    ref, ref_wall = (prod, prod_wall) if production == reference else run(obj, reference, poses)
+    # The reference's own repeatability: the same grid at a slightly different setting.
+    neighbour, _ = run(obj, with_iterations(reference, 60), poses)
+    faster, faster_wall = run(obj, with_iterations(reference, 15), poses)
 
     held = [r for r in prod if r.viable]
     phase = {k: float(np.sum([getattr(r.phases, k) for r in prod])) for k in
              ("reset_s", "approach_s", "closing_s", "trajectory_s", "sensitivity_s",
               "approach_steps", "closing_steps", "trajectory_steps", "sensitivity_steps")}
-    agreement = np.mean([agree(a, b) for a, b in zip(prod, ref, strict=True)])
+    agreement = share_agreeing(prod, ref)
     both = [(a, b) for a, b in zip(prod, ref, strict=True) if a.viable and b.viable]
     figures = {
         "poses": len(poses),
@@ -80,7 +100,11 @@ def main() -> None:
         "held_grasp_ms": 1000 * float(np.mean([r.eval_time_s for r in held])) if held else 0.0,
         "held_share": len(held) / len(poses),
         "reference_held_share": sum(r.viable for r in ref) / len(poses),
+        "production_is_reference": float(production == reference),
         "agreement_with_reference_share": float(agreement),
+        "agreement_reference_vs_60_iterations_share": share_agreeing(ref, neighbour),
+        "agreement_15_iterations_vs_reference_share": share_agreeing(faster, ref),
+        "evals_per_s_per_core_15_iterations": len(poses) / faster_wall,
         "mean_abs_mu_s_difference_where_both_held": float(
             np.mean([abs(a.mu_s - b.mu_s) for a, b in both])) if both else 0.0,
         "rate_hz": production.physics.rate_hz,

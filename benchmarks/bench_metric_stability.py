@@ -15,7 +15,8 @@ import numpy as np
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.sim import MetricSettings, SimSettings
-from graspscape.workers.sim.evaluate import evaluate_pose
+from graspscape.workers.sim.evaluate import default_cache_dir, evaluate_pose
+from graspscape.workers.sim.objects import prepare_object
 from scipy.stats import spearmanr
 
 try:
@@ -31,31 +32,36 @@ POSES = {
 }
 
 
-def mu_values(metric: MetricSettings) -> list[float]:
-    settings = SimSettings(metric=metric)
-    return [evaluate_pose(pose, obj=ObjectSpec(name=name), settings=settings).mu_s
-            for name, poses in POSES.items() for pose in poses]
+def mu_values(metric: MetricSettings, length_factor: float = 1.0) -> list[float]:
+    values = []
+    for name, poses in POSES.items():
+        obj = ObjectSpec(name=name)
+        if length_factor != 1.0:
+            prepared = prepare_object(obj, default_cache_dir() / "objects")
+            radius = math.sqrt(sum(prepared.inertia_diag) / 3 / prepared.mass_kg)
+            metric = metric.model_copy(update={"characteristic_length": length_factor * radius})
+        settings = SimSettings(metric=metric)
+        values += [evaluate_pose(pose, obj=obj, settings=settings).mu_s for pose in poses]
+    return values
 
 
 def main() -> None:
     base = MetricSettings()
-    length = {"sphere": math.sqrt(0.4) * 0.04}
     variants = {
         "instants": base.model_copy(update={"instants": max(1, base.instants // 2)}),
         "window": base.model_copy(update={"window_steps": max(1, base.window_steps // 2)}),
         "perturbation": base.model_copy(
             update={"perturbation_m_s2": base.perturbation_m_s2 / 2}),
-        # Halving the radius of gyration of each object is the same as a fixed length only
-        # per object; a fixed 1.3 cm (half the sphere's) is used for all.
-        "length": base.model_copy(update={"characteristic_length": length["sphere"] / 2}),
     }
     reference = np.array(mu_values(base))
     held = reference > 0
     figures: dict[str, float] = {"grasps": float(len(reference)),
                                  "held_grasps": float(held.sum()),
                                  "mean_mu_s_default": float(reference[held].mean())}
-    for name, metric in variants.items():
-        values = np.array(mu_values(metric))
+    variants_values = {name: mu_values(metric) for name, metric in variants.items()}
+    variants_values["length"] = mu_values(base, length_factor=0.5)  # half the radius of gyration
+    for name, values in variants_values.items():
+        values = np.array(values)
         figures[f"mean_abs_mu_s_change_halved_{name}"] = float(
             np.abs(values - reference)[held].mean())
         figures[f"rank_correlation_halved_{name}"] = float(

@@ -85,6 +85,8 @@ class MetricSettings(BaseModel):
     instants: int = Field(default=4, ge=1, le=50, description="sampled instants along the task")
     window_steps: int = Field(default=8, ge=1, le=100, description="probe window (the paper's ±ε)")
     perturbation_m_s2: float = Field(default=10.0, gt=0.0, le=100.0)
+    differences: Literal["forward", "central"] = Field(
+        default="forward", description="one-sided probes (+ε) or two-sided (±ε)")
     characteristic_length: Literal["radius_of_gyration"] | float = Field(
         default="radius_of_gyration",
         description="length that turns rad/s² into m/s²; default: the object's radius of gyration",

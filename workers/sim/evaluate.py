@@ -258,17 +258,14 @@ class Evaluator:
             turned = Rotation.from_matrix((rot.T @ o_rot) @ rel_rot0.T).magnitude()
             return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
 
-        qualities: list[float] = []
         effort = 0.0
-        probe_time = 0.0
         held = not slipped()
+        # States at the sampled instants; they are probed only once the grasp has held to the
+        # end (a probe restores what it found, so deferring it changes nothing but the cost).
+        saved: dict[int, int] = {}
         for step in range(n_steps if held else 0):
             if step in instants:
-                tp = time.perf_counter()
-                qualities.append(probe_instant(ctx, step, metric.window_steps, dt,
-                                               metric.perturbation_m_s2, self.length))
-                probe_time += time.perf_counter() - tp
-                phases.sensitivity_steps += 7 * metric.window_steps
+                saved[step] = p.saveState(physicsClientId=cid)
             position, rotation = target(step + 1)
             scene.drive_to(position, rotation)
             scene.step()
@@ -279,8 +276,18 @@ class Evaluator:
                 break
         if held and (slipped() or not scene.in_contact()):
             held = False
-        phases.sensitivity_s += probe_time
-        phases.trajectory_s += time.perf_counter() - t0 - probe_time
+        phases.trajectory_s += time.perf_counter() - t0
+        qualities: list[float] = []
+        tp = time.perf_counter()
+        central = metric.differences == "central"
+        for step, state in sorted(saved.items()):
+            if held:
+                p.restoreState(state, physicsClientId=cid)
+                qualities.append(probe_instant(ctx, step, metric.window_steps, dt,
+                                               metric.perturbation_m_s2, self.length, central))
+                phases.sensitivity_steps += (12 if central else 7) * metric.window_steps
+            p.removeState(state, physicsClientId=cid)
+        phases.sensitivity_s += time.perf_counter() - tp
         return held, qualities, effort
 
     def _finish(self, started: float, outcome: Outcome, result: dict) -> PoseResult:

@@ -44,7 +44,7 @@ def _velocities(ctx: ProbeContext, point_local: np.ndarray) -> tuple[np.ndarray,
 
 
 def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
-                  epsilon: float, length: float) -> float:
+                  epsilon: float, length: float, central: bool = False) -> float:
     """Quality 1 − σ_max(G − I) at trajectory step `step` (the state is left as found)."""
     cid = ctx.client
     state = p.saveState(physicsClientId=cid)
@@ -53,12 +53,12 @@ def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
     pivot = np.array(p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)[0])
     point_local = rot0.T @ (pivot - np.array(com))  # the gripper-fixed point at the object COM
 
-    def rollout(axis: int | None) -> tuple[np.ndarray, np.ndarray]:
+    def rollout(axis: int | None, sign: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         p.restoreState(state, physicsClientId=cid)
         for j in range(1, window + 1):
             position, rotation = ctx.target(step + j)
             if axis is not None:
-                amount = 0.5 * (j * dt) ** 2
+                amount = sign * 0.5 * (j * dt) ** 2
                 if axis < 3:
                     offset = np.zeros(3)
                     offset[axis] = epsilon * amount
@@ -72,14 +72,20 @@ def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
         return _velocities(ctx, point_local)
 
     try:
-        ref0, obj0 = rollout(None)
         span = window * dt
         d_ref = np.empty((6, 6))
         d_obj = np.empty((6, 6))
+        if not central:
+            ref0, obj0 = rollout(None)
         for axis in range(6):
             ref, obj = rollout(axis)
-            d_ref[:, axis] = (ref - ref0) / span
-            d_obj[:, axis] = (obj - obj0) / span
+            if central:  # ±ε: even-order effects of the perturbation cancel
+                ref0, obj0 = rollout(axis, -1.0)
+                ref, obj = (ref - ref0) / 2, (obj - obj0) / 2
+            else:
+                ref, obj = ref - ref0, obj - obj0
+            d_ref[:, axis] = ref / span
+            d_obj[:, axis] = obj / span
     finally:
         p.restoreState(state, physicsClientId=cid)
         p.removeState(state, physicsClientId=cid)
