@@ -96,6 +96,8 @@ class MetricSettings(BaseModel):
 class SimSettings(BaseModel):
     model_config = ConfigDict(frozen=True)
 
+    policy_name: str = Field(default="baseline", pattern=r"^[a-z][a-z0-9_]*$",
+                             description="grasp synthesis policy (workers/sim/policies)")
     physics: PhysicsSettings = PhysicsSettings()
     placement: PlacementSettings = PlacementSettings()
     policy: BaselinePolicySettings = BaselinePolicySettings()

@@ -93,7 +93,7 @@ class Evaluator:
         self.settings = settings or SimSettings()
         self.prepared = prepared
         self.gripper = gripper
-        self.policy = get_policy("baseline")
+        self.policy = get_policy(self.settings.policy_name)
         physics = self.settings.physics
         cid = p.connect(p.DIRECT)
         self.client = cid
@@ -193,7 +193,7 @@ class Evaluator:
         result["effective_r"] = gap
 
         outcome = self.policy.synthesize(self.scene, position, rotation, target,
-                                         self.settings.policy, phases)
+                                         self.settings, phases)
         if outcome is not None:
             return self._finish(started, outcome, result)
 

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 from graspscape.shared.specs.results import Outcome, PhaseTimes
-from graspscape.shared.specs.sim import BaselinePolicySettings
+from graspscape.shared.specs.sim import SimSettings
 
 BLOCKED_ADVANCE_M = 0.0005
 APPROACH_TIME_CAP_S = 1.5
@@ -27,7 +27,8 @@ class BaselinePolicy:
     name = "baseline"
 
     def synthesize(self, scene, position: np.ndarray, rotation: np.ndarray, target: np.ndarray,
-                   settings: BaselinePolicySettings, phases: PhaseTimes) -> Outcome | None:
+                   sim: SimSettings, phases: PhaseTimes) -> Outcome | None:
+        settings = sim.policy
         t0 = time.perf_counter()
         hand, dt = scene.hand, scene.dt
         gap = float(np.linalg.norm(target - position))
@@ -78,3 +79,6 @@ class BaselinePolicy:
         if not scene.in_contact():
             return Outcome.NO_GRASP
         return None
+
+
+POLICY = BaselinePolicy
