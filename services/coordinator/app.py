@@ -11,12 +11,13 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.api import explorations, health, objects, workers
-from graspscape.services.coordinator.errors import CoordinatorError
+from graspscape.services.coordinator.errors import CoordinatorError, InvalidInput
 from graspscape.services.coordinator.metrics import Metrics
 from graspscape.services.coordinator.settings import Settings, get_settings
 from graspscape.services.coordinator.store.queue import requeue_expired
@@ -74,7 +75,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @app.exception_handler(CoordinatorError)
     async def _domain_error(_request: Request, exc: CoordinatorError) -> JSONResponse:
-        return JSONResponse({"detail": exc.message}, status_code=exc.status_code)
+        if isinstance(exc, InvalidInput):
+            detail: Any = [{"loc": list(exc.loc), "msg": exc.message, "type": "value_error"}]
+        else:
+            detail = exc.message
+        return JSONResponse({"detail": detail}, status_code=exc.status_code)
 
     for router in (objects.router, explorations.router, workers.router, health.router):
         app.include_router(router)

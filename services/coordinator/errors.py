@@ -26,6 +26,10 @@ class Conflict(CoordinatorError):
 class InvalidInput(CoordinatorError):
     status_code = 422
 
+    def __init__(self, message: str, loc: tuple[str | int, ...] = ("body",)) -> None:
+        super().__init__(message)
+        self.loc = loc
+
 
 class PayloadTooLarge(CoordinatorError):
     status_code = 413

@@ -6,6 +6,7 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, Response, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
+from graspscape.services.coordinator.api.responses import UNAUTHORIZED, error
 from graspscape.services.coordinator.exploration import service
 from graspscape.services.coordinator.exploration.schemas import (
     ExplorationCreated,
@@ -21,7 +22,7 @@ from graspscape.shared.specs.exploration import ExplorationSpec
 router = APIRouter(tags=["explorations"])
 
 Id = Annotated[int, Path(ge=1, le=2**31 - 1, description="exploration id")]
-_NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no such exploration"}}
+_NOT_FOUND: dict[int | str, dict[str, Any]] = {404: error("no such exploration")}
 
 
 def _float(description: str) -> Any:
@@ -34,7 +35,8 @@ def _float(description: str) -> Any:
     status_code=status.HTTP_201_CREATED,
     dependencies=Mutating,
     responses={
-        401: {"description": "bearer token required"},
+        **UNAUTHORIZED,
+        400: error("body is not valid JSON"),
         422: {"description": "invalid spec or unknown object (detail names it)"},
     },
     summary="Submit an exploration; its coarse-pass tiles are queued at once",
@@ -92,8 +94,8 @@ def get_exploration(exploration_id: Id, session: SessionDep, settings: SettingsD
     dependencies=Mutating,
     responses={
         **_NOT_FOUND,
-        401: {"description": "bearer token required"},
-        409: {"description": "the exploration is already done"},
+        **UNAUTHORIZED,
+        409: error("the exploration is already done"),
     },
     summary="Cancel: no more tiles are handed out; stored results stay",
 )
@@ -105,7 +107,7 @@ def cancel(exploration_id: Id, session: SessionDep) -> Any:
     "/explorations/{exploration_id}",
     status_code=status.HTTP_204_NO_CONTENT,
     dependencies=Mutating,
-    responses={**_NOT_FOUND, 401: {"description": "bearer token required"}},
+    responses={**_NOT_FOUND, **UNAUTHORIZED},
     summary="Delete an exploration with its tiles and poses",
 )
 def delete(exploration_id: Id, session: SessionDep) -> Response:

@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
+from graspscape.services.coordinator.api.responses import NOT_FOUND, UNAUTHORIZED, error
 from graspscape.services.coordinator.errors import InvalidInput, PayloadTooLarge
 from graspscape.services.coordinator.objects import service
 from graspscape.services.coordinator.objects.schemas import ObjectOut, ObjectPage
@@ -16,9 +17,10 @@ router = APIRouter(tags=["objects"])
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 _ERRORS: dict[int | str, dict[str, Any]] = {
-    401: {"description": "bearer token required"},
-    413: {"description": "upload larger than max_upload_bytes"},
-    415: {"description": "unsupported mesh file format"},
+    **UNAUTHORIZED,
+    400: error("malformed multipart body"),
+    413: error("upload larger than max_upload_bytes"),
+    415: error("unsupported mesh file format"),
     422: {"description": "invalid properties, name or mesh (the detail names the problem)"},
 }
 
@@ -31,7 +33,10 @@ def _inertia(text: str | None) -> tuple[float, float, float] | None:
     except ValueError:
         values = ()
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise InvalidInput("inertia_diag must be three finite comma-separated numbers, kg·m²")
+        raise InvalidInput(
+            "inertia_diag must be three finite comma-separated numbers, kg·m²",
+            loc=("body", "inertia_diag"),
+        )
     return values  # type: ignore[return-value]
 
 
@@ -86,9 +91,12 @@ def create_object(
         }.items()
         if v is not None
     }
-    for label, text in (("name", name), ("file name", file.filename if file else None)):
+    for label, field, text in (
+        ("name", "name", name),
+        ("file name", "file", file.filename if file else None),
+    ):
         if text is not None and _CONTROL.search(text):
-            raise InvalidInput(f"{label} contains control characters")
+            raise InvalidInput(f"{label} contains control characters", loc=("body", field))
     if file is not None and name:
         raise InvalidInput("give either a mesh file or a name, not both")
     if file is not None:
@@ -122,7 +130,7 @@ def list_objects(
 @router.get(
     "/objects/{object_id}",
     response_model=ObjectOut,
-    responses={404: {"description": "no such object"}},
+    responses=NOT_FOUND,
 )
 def get_object(session: SessionDep, object_id: Annotated[int, Path(ge=1, le=2**31 - 1)]) -> Any:
     return service.get_object(session, object_id=object_id)

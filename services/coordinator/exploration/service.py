@@ -28,12 +28,16 @@ def create_exploration(
     session: Session, *, spec: ExplorationSpec, tile_target_poses: int, max_poses: int
 ) -> ExplorationRow:
     if session.get(ObjectRow, spec.object_id) is None:
-        raise InvalidInput(f"object_id {spec.object_id} does not exist; upload it to /objects")
+        raise InvalidInput(
+            f"object_id {spec.object_id} does not exist; upload it to /objects",
+            loc=("body", "object_id"),
+        )
     poses_total = count_poses(spec.grid)
     if poses_total > max_poses:
         raise InvalidInput(
             f"the pose grid has {poses_total} poses, more than the limit of {max_poses}; "
-            "raise grid.dtheta or grid.dr, or use fewer attitudes"
+            "raise grid.dtheta or grid.dr, or use fewer attitudes",
+            loc=("body", "grid"),
         )
     tiles = coarse_tiles(spec.grid, target_poses=tile_target_poses)
     now = utcnow()
@@ -177,7 +181,7 @@ def list_poses(
     get_exploration(session, exploration_id=exploration_id)
     problems = filters.inverted_ranges()
     if problems:
-        raise InvalidInput("; ".join(problems))
+        raise InvalidInput("; ".join(problems), loc=("query",))
     query = select(PoseRow).where(PoseRow.exploration_id == exploration_id)
     if cursor is not None:
         query = query.where(PoseRow.id > cursor)

@@ -21,6 +21,10 @@ MESH_FORMATS = ("obj", "stl", "ply", "glb", "off")
 MAX_EXTENT_M = 5.0
 
 
+def _invalid(message: str) -> InvalidInput:
+    return InvalidInput(message, loc=("body", "file"))
+
+
 class MeshInfo(BaseModel):
     vertices: int
     faces: int
@@ -41,24 +45,24 @@ def mesh_format(filename: str | None) -> str:
 
 def validate_mesh(data: bytes, fmt: str, *, scale: float = 1.0) -> MeshInfo:
     if not data:
-        raise InvalidInput("mesh file is empty")
+        raise _invalid("mesh file is empty")
     try:
         mesh = trimesh.load(io.BytesIO(data), file_type=fmt, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for malformed files
-        raise InvalidInput(f"mesh could not be read as .{fmt}: {exc}") from exc
+        raise _invalid(f"mesh could not be read as .{fmt}: {exc}") from exc
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InvalidInput("mesh has no faces")
+        raise _invalid("mesh has no faces")
     vertices = np.asarray(mesh.vertices, dtype=float)
     if not np.isfinite(vertices).all():
-        raise InvalidInput("mesh has non-finite vertex coordinates (NaN or infinity)")
+        raise _invalid("mesh has non-finite vertex coordinates (NaN or infinity)")
     # Loaded unprocessed so NaNs are seen above; STL repeats vertices per face, merge them so
     # a closed surface reads as watertight.
     mesh.merge_vertices()
     extents = tuple(float(e) * scale for e in mesh.extents)
     if min(extents) <= 1e-9:
-        raise InvalidInput("mesh is flat: zero extent along one axis, so zero volume")
+        raise _invalid("mesh is flat: zero extent along one axis, so zero volume")
     if max(extents) > MAX_EXTENT_M:
-        raise InvalidInput(
+        raise _invalid(
             f"mesh is {max(extents):.3g} m across at scale {scale}; meshes are in metres "
             "(set 'scale', e.g. 0.001 for millimetres)"
         )
@@ -72,7 +76,7 @@ def validate_mesh(data: bytes, fmt: str, *, scale: float = 1.0) -> MeshInfo:
             volume = 0.0
     volume *= scale**3
     if not math.isfinite(volume) or volume <= 1e-15:
-        raise InvalidInput("mesh has zero volume")
+        raise _invalid("mesh has zero volume")
     return MeshInfo(
         vertices=len(mesh.vertices),
         faces=len(mesh.faces),

@@ -38,7 +38,7 @@ def _properties(name: str | None, mesh_path: str | None, props: dict[str, Any]) 
     try:
         spec = ObjectSpec(name=name, mesh_path=mesh_path, **props)
     except ValidationError as exc:
-        raise InvalidInput(validation_message(exc)) from exc
+        raise InvalidInput(validation_message(exc), loc=("body",)) from exc
     return spec.model_dump(mode="json", exclude={"name", "mesh_path"}, exclude_none=True)
 
 

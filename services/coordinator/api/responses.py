@@ -1,0 +1,24 @@
+"""Documented error responses, so the OpenAPI document lists every status a route returns.
+
+Refusals other than 422 carry `{"detail": "<what is wrong>"}`. A 422 has FastAPI's validation
+shape `{"detail": [{"loc", "msg", "type"}]}` whether pydantic or a service refused the
+input, so clients parse one format.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel
+
+
+class ErrorOut(BaseModel):
+    detail: str
+
+
+def error(description: str) -> dict[str, Any]:
+    return {"model": ErrorOut, "description": description}
+
+
+UNAUTHORIZED = {401: error("bearer token missing or wrong (when api_token is set)")}
+NOT_FOUND = {404: error("no such resource")}
