@@ -284,3 +284,11 @@ def test_healthz_and_metrics(
         'graspscape_http_requests_total{method="GET",'
         'route="/explorations/{exploration_id}",status="200"} 1.0'
     ) in text
+
+
+def test_service_refusals_use_the_validation_error_shape(client: TestClient) -> None:
+    response = client.post("/explorations", json={"object_id": 77, "gripper": "g"})
+    assert response.status_code == 422
+    (error,) = response.json()["detail"]
+    assert error["loc"] == ["body", "object_id"] and error["type"] == "value_error"
+    assert error["msg"] == "object_id 77 does not exist; upload it to /objects"

@@ -57,9 +57,9 @@ def test_shared_folder_objects(client: TestClient, settings: Settings) -> None:
     assert ok.status_code == 201, ok.text
     assert ok.json()["kind"] == "shared" and ok.json()["mesh_info"]["faces"] == 4
     missing = client.post("/objects", data={"name": "shared:nope.obj"})
-    assert missing.status_code == 422 and "does not exist" in missing.json()["detail"]
+    assert missing.status_code == 422 and "does not exist" in str(missing.json()["detail"])
     escape = client.post("/objects", data={"name": "shared:../secret.obj"})
-    assert escape.status_code == 422 and "outside the shared folder" in escape.json()["detail"]
+    assert escape.status_code == 422 and "outside the shared folder" in str(escape.json()["detail"])
 
 
 def _flat_obj() -> bytes:
