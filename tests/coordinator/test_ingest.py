@@ -184,3 +184,22 @@ def test_a_batch_with_every_optional_field_empty(session: Session) -> None:
     assert report.inserted == len(bare)
     stored = session.scalars(select(PoseRow).where(PoseRow.exploration_id == eid)).all()
     assert all(p.signature is None and p.grasp is None and p.effective_r is None for p in stored)
+
+
+def test_a_late_report_before_anyone_re_leases_still_finishes_the_tile(session: Session) -> None:
+    eid = make_exploration(session)
+    past = utcnow() - timedelta(hours=1)
+    (t,) = lease_tiles(session, worker_id="slow", n=1, lease_seconds=60, now=past)
+    requeue_expired(session, max_attempts=5)
+    assert session.get(TileRow, t.tile_id).state == "queued"  # type: ignore[union-attr]
+    report = ingest_results(
+        session,
+        tile_id=t.tile_id,
+        lease_epoch=t.lease_epoch,
+        worker_id="slow",
+        results=fake_results(t.poses()),
+    )
+    assert (report.tile_moved, report.tile_state) == (True, "done")
+    again = lease_tiles(session, worker_id="w", n=100, lease_seconds=60)
+    assert t.tile_id not in {x.tile_id for x in again}
+    assert exploration(session, eid).poses_done == len(t.poses())

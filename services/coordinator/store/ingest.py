@@ -3,9 +3,9 @@
 `INSERT … ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable` stores each pose
 once and tells exactly which rows are new, so the exploration's counters only count those: a
 batch sent twice (a retry, or a late report from an expired lease) leaves the same rows and
-the same counts. The tile moves to done only under the lease epoch it is currently leased
-with. Results are stored even when they cannot move the tile (stale epoch, cancelled
-exploration): computed poses are never thrown away.
+the same counts. The tile moves to done only under its current lease epoch (leased, or
+queued again after expiry but not yet re-leased). Results are stored even when they cannot
+move the tile (stale epoch, cancelled exploration): computed poses are never thrown away.
 """
 
 from __future__ import annotations
@@ -180,13 +180,17 @@ def ingest_results(
 
     moved = False
     state = tile.state
-    if final and tile.state == TileState.LEASED and tile.lease_epoch == lease_epoch:
+    # The lease under which the results were computed is the tile's current one when the
+    # epochs match. Its tile may be `queued` if the lease ran out but nobody re-leased it
+    # yet: the complete result then still finishes it, sparing a second evaluation.
+    movable = (TileState.LEASED, TileState.QUEUED)
+    if final and tile.state in movable and tile.lease_epoch == lease_epoch:
         moved = (
             session.execute(
                 update(TileRow)
                 .where(
                     TileRow.id == tile_id,
-                    TileRow.state == TileState.LEASED,
+                    TileRow.state.in_(movable),
                     TileRow.lease_epoch == lease_epoch,
                 )
                 .values(
@@ -197,9 +201,9 @@ def ingest_results(
                     lease_expires_at=None,
                 )
                 .execution_options(synchronize_session=False)
-            ).rowcount
+            ).rowcount  # type: ignore[attr-defined]
             == 1
-        )  # type: ignore[attr-defined]
+        )
         if moved:
             state = TileState.DONE
             finish_complete_explorations(session, [tile.exploration_id], now=now)
