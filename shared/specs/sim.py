@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Literal
 
+from graspscape.shared.specs.haptic import HapticPolicySettings
 from pydantic import BaseModel, ConfigDict, Field
 
 
@@ -101,6 +102,7 @@ class SimSettings(BaseModel):
     physics: PhysicsSettings = PhysicsSettings()
     placement: PlacementSettings = PlacementSettings()
     policy: BaselinePolicySettings = BaselinePolicySettings()
+    haptic: HapticPolicySettings = HapticPolicySettings()
     trajectory: TrajectorySpec = TrajectorySpec()
     metric: MetricSettings = MetricSettings()
     spread_mode: str = "basic"

@@ -1,0 +1,267 @@
+"""The shape-informed haptic grasp synthesis policy G_s (paper Sec. III-D, Alg. 1).
+
+Proximity sensor model: every gripper link (the palm and each phalanx) reads its distance to
+the nearest object surface, pybullet's closest-point query per link, saturated at the sensing
+range and optionally perturbed by seeded Gaussian noise.
+
+Step 1, digit alignment: the base holds still while the finger joints θ move along the damped
+pseudo-inverse of Ĵ_s = ∂d̂/∂θ, d̂_i = d_i − d_b (link distance minus the palm's), asking for
+d̂ → 0: links closer than the palm open away, links further away close in (the paper's Fig. 5).
+Done when max d̂_i ≤ Δd_s (Alg. 1's loop condition: no link lags behind the palm by more than
+the tolerance; links already closer than the palm pass, since the open hand's fingers reach
+past the palm and often sit at their opening limit). If the worst offset stops improving (or
+the iteration limit is reached) no reachable joint configuration meets the tolerance: the pose
+is non-viable (outcome no_grasp, μs = 0).
+
+Step 2, grasp closure: base pose and joints move together along the pseudo-inverse of
+J_s = ∂[d_b, d_1 … d_n]/∂[η_r, θ_g], asking every distance to shrink by the same step (so the
+hand closes in homogeneously, keeping the shape it took in step 1) until every link touches or
+the hand is blocked by the contacts it made. Then, as in G_c, the base holds and the closing
+torque τ_c drives the fingers until their motion halts (the hand's under-actuated closing).
+
+Both iterations are closed loops on the live simulation: each update is sent to the base drive
+(force-capped like G_c's approach) and the joint position motors, the physics runs a few steps,
+and the next Jacobian is estimated at the pose actually reached. Jacobians are finite
+differences of the sensor model: a probe teleports one joint (or the base) with resetJointState
+(resetBasePositionAndOrientation), reads the distances and puts the exact positions and
+velocities back, so probing never changes what the simulation does next (a test checks it).
+Probe readings are noise-free: the Jacobian stands for the local surface model a real
+controller would fit; the noise enters the readings that set the targets.
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+
+import numpy as np
+import pybullet as p
+from graspscape.shared.specs.haptic import HapticPolicySettings
+from graspscape.shared.specs.results import Outcome, PhaseTimes
+from graspscape.shared.specs.sim import SimSettings
+from scipy.spatial.transform import Rotation
+
+
+class ProximitySensors:
+    """Distance of each sensing link to the object; index 0 is the palm (link −1)."""
+
+    def __init__(self, scene, settings: HapticPolicySettings, seed: int) -> None:
+        self.scene = scene
+        self.hand = scene.hand
+        self.client = scene.client
+        self.range = settings.sensing_range_m
+        self.noise = settings.noise_std_m
+        self.rng = np.random.default_rng(seed)
+        self.links = [-1] + [j for f in self.hand.fingers for j in f.joints]
+        self.index = {link: i for i, link in enumerate(self.links)}
+
+    def _distance(self, link: int) -> float:
+        points = p.getClosestPoints(self.hand.body, self.scene.object_body, self.range,
+                                    linkIndexA=link, physicsClientId=self.client)
+        return min((pt[8] for pt in points), default=self.range)
+
+    def exact(self, links: list[int] | None = None) -> np.ndarray:
+        return np.array([self._distance(link) for link in (links or self.links)])
+
+    def read(self) -> np.ndarray:
+        distances = self.exact()
+        if self.noise > 0.0:
+            distances = distances + self.rng.normal(0.0, self.noise, distances.shape)
+        return np.minimum(distances, self.range)
+
+
+class HandState:
+    """Exact positions and velocities of the hand, to put back after a probe."""
+
+    def __init__(self, hand) -> None:
+        cid = hand.client
+        self.hand = hand
+        self.base = p.getBasePositionAndOrientation(hand.body, physicsClientId=cid)
+        self.velocity = p.getBaseVelocity(hand.body, physicsClientId=cid)
+        self.joints = {j: p.getJointState(hand.body, j, physicsClientId=cid)[:2]
+                       for j in hand.movable}
+
+    def restore_joint(self, joint: int) -> None:
+        q, qd = self.joints[joint]
+        p.resetJointState(self.hand.body, joint, q, qd, physicsClientId=self.hand.client)
+
+    def restore_base(self) -> None:
+        cid, body = self.hand.client, self.hand.body
+        p.resetBasePositionAndOrientation(body, *self.base, physicsClientId=cid)
+        p.resetBaseVelocity(body, *self.velocity, physicsClientId=cid)
+
+
+def _descendants(hand) -> dict[int, list[int]]:
+    """Links that move when a finger joint moves: that phalanx and the ones after it."""
+    out: dict[int, list[int]] = {}
+    for finger in hand.fingers:
+        for k, joint in enumerate(finger.joints):
+            out[joint] = finger.joints[k:]
+    return out
+
+
+def joint_jacobian(sensors: ProximitySensors, joints: list[int], step: float) -> np.ndarray:
+    """∂d/∂θ (rows: sensing links, columns: joints) by forward differences."""
+    hand = sensors.hand
+    state = HandState(hand)
+    moved = _descendants(hand)
+    base = sensors.exact()
+    jac = np.zeros((len(sensors.links), len(joints)))
+    for col, joint in enumerate(joints):
+        q = state.joints[joint][0]
+        upper = p.getJointInfo(hand.body, joint, physicsClientId=hand.client)[9]
+        # Step inward unless that leaves the joint range (then outward): the model stays valid.
+        h = step if q + step <= upper else -step
+        p.resetJointState(hand.body, joint, q + h, 0.0, physicsClientId=hand.client)
+        links = moved[joint]
+        probe = sensors.exact(links)
+        for link, value in zip(links, probe, strict=True):
+            row = sensors.index[link]
+            jac[row, col] = (value - base[row]) / h
+        state.restore_joint(joint)
+    return jac
+
+
+def base_jacobian(sensors: ProximitySensors, step_m: float, step_rad: float) -> np.ndarray:
+    """∂d/∂η_r: world translations of the gripper frame, then rotations about world axes
+    through the palm centre (rows: sensing links)."""
+    hand = sensors.hand
+    state = HandState(hand)
+    base = sensors.exact()
+    frame_pos, frame_rot = hand.frame_pose()
+    jac = np.zeros((len(sensors.links), 6))
+    for col in range(6):
+        axis = np.zeros(3)
+        axis[col % 3] = 1.0
+        if col < 3:
+            pos, rot, h = frame_pos + axis * step_m, frame_rot, step_m
+        else:
+            turn = Rotation.from_rotvec(axis * step_rad).as_matrix()
+            pos, rot, h = frame_pos, turn @ frame_rot, step_rad
+        com, orn = hand.com_pose_for(pos, rot)
+        p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=hand.client)
+        jac[:, col] = (sensors.exact() - base) / h
+        state.restore_base()
+    return jac
+
+
+def damped_pinv_step(jac: np.ndarray, wanted: np.ndarray, damping: float) -> np.ndarray:
+    """Δx = Jᵀ(JJᵀ + λ²I)⁻¹ Δd: the pseudo-inverse step, damped so that near-singular
+    directions (a link that no joint can move, a saturated reading) do not blow it up."""
+    rows = jac.shape[0]
+    return jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(rows), wanted)
+
+
+def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v * (limit / n) if n > limit else v
+
+
+class HapticPolicy:
+    name = "haptic"
+
+    def synthesize(self, scene, position: np.ndarray, rotation: np.ndarray, target: np.ndarray,
+                   sim: SimSettings, phases: PhaseTimes) -> Outcome | None:
+        cfg = sim.haptic
+        hand, cid = scene.hand, scene.client
+        # Same inputs, same noise: the seed comes from the settings and the start pose.
+        key = np.round(np.concatenate([position, rotation.ravel()]), 9).tobytes()
+        sensors = ProximitySensors(scene, cfg, zlib.crc32(key) ^ cfg.noise_seed)
+        joints = list(hand.finger_joints)
+        limits = np.array([p.getJointInfo(hand.body, j, physicsClientId=cid)[8:10]
+                           for j in joints])
+
+        def angles() -> np.ndarray:
+            return np.array([s[0] for s in p.getJointStates(hand.body, joints,
+                                                            physicsClientId=cid)])
+
+        def command_joints(values: np.ndarray, force: float) -> None:
+            p.setJointMotorControlArray(hand.body, joints, p.POSITION_CONTROL,
+                                        targetPositions=values.tolist(),
+                                        forces=[force] * len(joints), physicsClientId=cid)
+
+        def run(steps: int) -> None:
+            for _ in range(steps):
+                scene.step()
+                phases.approach_steps += 1
+
+        t0 = time.perf_counter()
+        # --- step 1: digit alignment (base still, joints only) --------------------------
+        scene.drive_to(position, rotation)
+        hold = hand.hold_factor * hand.effort
+        best, best_at, aligned = np.inf, 0, False
+        for iteration in range(cfg.alignment_max_iterations):
+            d = sensors.read()
+            offsets = d[1:] - d[0]
+            # Alg. 1's condition: no link further from the object than the palm by more than
+            # Δd_s. Links closer than the palm (the open fingers reach past it) pass: they are
+            # steered away where their joint range allows, but at the opening limit they can't.
+            worst = float(np.max(offsets))
+            if worst <= cfg.alignment_tolerance_m:
+                aligned = True
+                break
+            if worst < best - cfg.alignment_stall_m:
+                best, best_at = worst, iteration
+            elif iteration - best_at >= cfg.stall_window:
+                break  # no joint configuration gets closer: the tolerance is out of reach
+            # The palm does not move in step 1, so ∂d̂/∂θ is the links' rows of ∂d/∂θ.
+            jac = joint_jacobian(sensors, joints, cfg.jacobian_joint_step_rad)[1:]
+            dq = damped_pinv_step(jac, -offsets, cfg.damping)
+            dq = np.clip(dq, -cfg.max_joint_step_rad, cfg.max_joint_step_rad)
+            command_joints(np.clip(angles() + dq, limits[:, 0], limits[:, 1]), hold)
+            run(cfg.steps_per_iteration)
+        if not aligned:
+            phases.approach_s = time.perf_counter() - t0
+            return Outcome.NO_GRASP
+
+        # --- step 2: grasp closure (base pose and joints together) ----------------------
+        progress: list[float] = []
+        for _ in range(cfg.closure_max_iterations):
+            d = sensors.read()
+            excess = np.maximum(d - cfg.closure_contact_m, 0.0)
+            if not excess.any():
+                break  # every link touches
+            progress.append(float(excess.sum()))
+            if (len(progress) > cfg.stall_window and scene.in_contact()
+                    and progress[-cfg.stall_window - 1] - progress[-1] < cfg.closure_step_m):
+                break  # blocked by the contacts made: the grasp has emerged
+            jac = np.hstack([base_jacobian(sensors, cfg.jacobian_base_step_m,
+                                           cfg.jacobian_base_step_rad),
+                             joint_jacobian(sensors, joints, cfg.jacobian_joint_step_rad)])
+            wanted = -np.minimum(excess, cfg.closure_step_m)
+            dx = damped_pinv_step(jac, wanted, cfg.damping)
+            shift = _clip_norm(dx[:3], cfg.max_base_step_m)
+            turn = _clip_norm(dx[3:6], cfg.max_base_step_rad)
+            dq = np.clip(dx[6:], -cfg.max_joint_step_rad, cfg.max_joint_step_rad)
+            frame_pos, frame_rot = hand.frame_pose()
+            goal_rot = Rotation.from_rotvec(turn).as_matrix() @ frame_rot
+            scene.drive_to(frame_pos + shift, goal_rot, max_force=cfg.base_force_n)
+            # Joints push with at most the closing effort, as G_c's fingers do.
+            command_joints(np.clip(angles() + dq, limits[:, 0], limits[:, 1]), hand.effort)
+            run(cfg.steps_per_iteration)
+        phases.approach_s = time.perf_counter() - t0
+        if not scene.in_contact():
+            return Outcome.NO_CONTACT
+
+        # --- hold: the base stays, the closing torque τ_c closes the fingers (as G_c) --------
+        t1 = time.perf_counter()
+        closing = sim.policy
+        held_pos, held_rot = hand.frame_pose()
+        scene.drive_to(held_pos, held_rot)
+        # Phalanges not yet closing are held where step 2 left them, stiff as in G_c.
+        command_joints(angles(), hold)
+        hand.begin_closing(closing.closing_speed)
+        cap = max(1, round(closing.closing_cap_s / scene.dt))
+        for step in range(1, cap + 1):
+            scene.step()
+            phases.closing_steps += 1
+            if step % closing.check_every_steps == 0 and hand.update_closing(
+                    closing.stall_tolerance):
+                break
+        phases.closing_s = time.perf_counter() - t1
+        if not scene.in_contact():
+            return Outcome.NO_GRASP
+        return None
+
+
+POLICY = HapticPolicy
