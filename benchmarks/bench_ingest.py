@@ -133,6 +133,7 @@ def main() -> int:
                 "figures": figures,
             },
             indent=2,
+            ensure_ascii=False,
         )
         + "\n"
     )
