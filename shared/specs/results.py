@@ -71,3 +71,11 @@ class PoseResult(BaseModel):
     signature: GraspSignature | None = None
     eval_time_s: float = 0.0
     phases: PhaseTimes = Field(default_factory=PhaseTimes)
+    mu_g: float | None = Field(
+        default=None, ge=0.0, description="grasp-matrix metric of the synthesized grasp")
+    mu_f: float | None = Field(
+        default=None, ge=0.0, description="Ferrari–Canny ε of the synthesized grasp")
+    mu_m: float | None = Field(
+        default=None, ge=0.0, description="perturbation resistance, in object weights")
+    min_closing_effort: float | None = Field(
+        default=None, ge=0.0, description="least closing torque that still holds, N·m")

@@ -27,6 +27,7 @@ from graspscape.shared.specs.results import (
 )
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.geometry import quat_from_matrix
+from graspscape.workers.sim.grasp_metrics import scene_metrics
 from graspscape.workers.sim.gripper.hand import Hand
 from graspscape.workers.sim.metric import mu_s
 from graspscape.workers.sim.objects import (
@@ -214,6 +215,7 @@ class Evaluator:
         for link, _, _ in raw:
             counts[link] = counts.get(link, 0) + 1
         result["contacts_per_link"] = counts
+        result.update(scene_metrics(scene, self.length, self.prepared.mass_kg))  # μg, μf, μm
 
         if picture is not None:
             render_scene(self.client, obj_pos, picture)
