@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from datetime import timedelta
 
 import pytest
@@ -12,7 +13,7 @@ from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
 from graspscape.services.coordinator.store.queue import lease_tiles, requeue_expired
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 
 from tests.coordinator.helpers import fake_results
 from tests.coordinator.test_queue import make_exploration
@@ -203,3 +204,52 @@ def test_a_late_report_before_anyone_re_leases_still_finishes_the_tile(session: 
     again = lease_tiles(session, worker_id="w", n=100, lease_seconds=60)
     assert t.tile_id not in {x.tile_id for x in again}
     assert exploration(session, eid).poses_done == len(t.poses())
+
+
+def test_concurrent_reports_of_the_same_tiles_count_each_pose_once(
+    sessions: sessionmaker[Session],
+) -> None:
+    with sessions() as s:
+        eid = make_exploration(s)
+        leased = lease_tiles(s, worker_id="w", n=6, lease_seconds=600)
+    batches = [(t, fake_results(t.poses(), seed=t.tile_id)) for t in leased]
+    errors: list[BaseException] = []
+    moved: list[int] = []
+
+    def report(offset: int) -> None:
+        try:
+            with sessions() as s:
+                # Every thread sends every tile (retries, duplicates), in a different order.
+                for t, results in batches[offset:] + batches[:offset]:
+                    r = ingest_results(
+                        s,
+                        tile_id=t.tile_id,
+                        lease_epoch=t.lease_epoch,
+                        worker_id=f"w{offset}",
+                        results=results,
+                    )
+                    if r.tile_moved:
+                        moved.append(t.tile_id)
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=report, args=(i,)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert not errors
+    assert sorted(moved) == sorted(t.tile_id for t in leased)  # each tile moved exactly once
+    total = sum(len(results) for _, results in batches)
+    row = exploration_row(sessions, eid)
+    assert row.poses_done == total
+    assert row.viable_count == sum(r.viable for _, results in batches for r in results)
+    with sessions() as s:
+        assert pose_count(s, eid) == total
+
+
+def exploration_row(sessions: sessionmaker[Session], eid: int) -> ExplorationRow:
+    with sessions() as s:
+        row = s.get(ExplorationRow, eid)
+        assert row is not None
+        return row

@@ -28,7 +28,7 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.services.coordinator.store.workers import touch_worker
 from graspscape.shared.specs.pose import Pose
 from pydantic import BaseModel, ConfigDict
-from sqlalchemy import String, cast, literal, select, update
+from sqlalchemy import String, case, cast, literal, select, update
 from sqlalchemy.orm import Session
 
 
@@ -174,24 +174,37 @@ def fail_tile(
     Returns the tile's state afterwards. A report under a stale epoch changes nothing.
     """
     now = now or utcnow()
-    tile = session.get(TileRow, tile_id, with_for_update=is_postgres(session))
-    if tile is None:
+    # One conditional UPDATE: atomic against the sweeper and a re-lease on both databases.
+    row = session.execute(
+        update(TileRow)
+        .where(
+            TileRow.id == tile_id,
+            TileRow.state == TileState.LEASED,
+            TileRow.lease_epoch == lease_epoch,
+        )
+        .values(
+            state=case(
+                (TileRow.attempts >= max_attempts, TileState.FAILED.value),
+                else_=TileState.QUEUED.value,
+            ),
+            last_error=error[:4000],
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        )
+        .returning(TileRow.state, TileRow.exploration_id)
+        .execution_options(synchronize_session=False)
+    ).one_or_none()
+    if row is None:  # unknown tile, or a stale epoch: nothing changes
         session.rollback()
-        raise NotFound(f"tile {tile_id} does not exist")
-    if tile.state != TileState.LEASED or tile.lease_epoch != lease_epoch:
-        state = tile.state
-        session.rollback()
+        state = session.scalar(select(TileRow.state).where(TileRow.id == tile_id))
+        if state is None:
+            raise NotFound(f"tile {tile_id} does not exist")
         return state
-    tile.last_error = error[:4000]
-    tile.lease_owner = None
-    tile.lease_expires_at = None
-    tile.updated_at = now
-    tile.state = TileState.FAILED if tile.attempts >= max_attempts else TileState.QUEUED
-    session.flush()
-    if tile.state == TileState.FAILED:
-        finish_complete_explorations(session, [tile.exploration_id], now=now)
+    if row.state == TileState.FAILED:
+        finish_complete_explorations(session, [row.exploration_id], now=now)
     session.commit()
-    return tile.state
+    return row.state
 
 
 def requeue_expired(
