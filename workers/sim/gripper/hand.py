@@ -6,7 +6,7 @@ linkage); the first phalanx closes under a force-capped velocity motor (so it pu
 finger's closing effort once blocked, and never overshoots a limit, which pure torque control
 does on such light links); when a closing phalanx halts (blocked by the object, or at its
 limit), the next one starts closing too, and the blocked ones keep pushing. A finger whose
-phalanges have all halted is done. See docs/gripper.md.
+phalanges have all halted is done. See docs/simulation.md.
 """
 
 from __future__ import annotations
