@@ -1,7 +1,8 @@
 """What an exploration is, as a user submits it: object, gripper, policy, pose grid, trajectory.
 
 The coordinator stores the spec exactly as submitted and derives its tiles of work from the
-pose grid; workers read the gripper, policy and trajectory from it. Ranges are validated here
+pose grid; workers read the gripper and the simulation settings (policy, trajectory, metric)
+from it. Ranges are validated here
 so that a bad spec fails at submission with a message naming the field, not hours later on a
 worker.
 """
@@ -11,7 +12,9 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from graspscape.shared.specs.gripper import list_grippers
+from graspscape.shared.specs.sim import SimSettings
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 # Names of grippers and policies are resolved by the workers (configs/grippers, policy
 # registry); here they only have to be safe identifiers.
@@ -80,17 +83,6 @@ class PoseGridSpec(BaseModel):
         return [round(self.r_min + i * self.dr, 9) for i in range(n)]
 
 
-class TrajectorySpec(BaseModel):
-    """What the object is put through once grasped, to tell held grasps from dropped ones."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-    kind: Literal["lift", "shake", "lift_shake"] = "lift_shake"
-    duration_s: float = Field(default=2.0, gt=0.0, le=30.0)
-    amplitude_m: float = Field(default=0.05, ge=0.0, le=0.5, description="displacement, m")
-    frequency_hz: float = Field(default=1.0, ge=0.0, le=20.0, description="shake frequency")
-
-
 class RefinementSpec(BaseModel):
     """How the adaptive pass refines the coarse grid where outcomes change."""
 
@@ -113,11 +105,36 @@ class ExplorationSpec(BaseModel):
     object_id: int = Field(
         ge=1, le=2**31 - 1, description="id of an object stored through POST /objects"
     )
-    gripper: str = Field(pattern=_NAME_PATTERN, description="gripper spec name")
-    policy: str = Field(default="default", pattern=_NAME_PATTERN, description="closing policy")
+    gripper: str = Field(
+        default="robotiq_3f", pattern=_NAME_PATTERN, description="gripper spec name"
+    )
     grid: PoseGridSpec = Field(default_factory=PoseGridSpec)
-    trajectory: TrajectorySpec = Field(default_factory=TrajectorySpec)
+    settings: SimSettings = Field(
+        default_factory=SimSettings,
+        description="what every pose evaluation depends on: policy (settings.policy_name), "
+        "trajectory, physics, metric, start-pose rule",
+    )
     refinement: RefinementSpec = Field(default_factory=RefinementSpec)
     label: str | None = Field(
         default=None, max_length=200, pattern=r"^[^\x00]*$", description="free text for humans"
     )
+
+    @field_validator("gripper")
+    @classmethod
+    def _known_gripper(cls, name: str) -> str:
+        known = list_grippers()
+        if name not in known:
+            raise ValueError(f"unknown gripper {name!r}; known: {', '.join(known)}")
+        return name
+
+    @field_validator("settings")
+    @classmethod
+    def _known_policy(cls, settings: SimSettings) -> SimSettings:
+        # The registry lives with the simulation; importing it here costs no physics client.
+        from graspscape.workers.sim.policies import list_policies
+
+        known = list_policies()
+        if settings.policy_name not in known:
+            raise ValueError(
+                f"unknown policy {settings.policy_name!r}; known: {', '.join(known)}")
+        return settings

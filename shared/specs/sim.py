@@ -11,7 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 
 class PhysicsSettings(BaseModel):
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     rate_hz: float = Field(default=240.0, ge=60.0, le=2000.0)
     solver_iterations: int = Field(default=50, ge=1, le=500)
@@ -24,7 +24,7 @@ class PhysicsSettings(BaseModel):
 class PlacementSettings(BaseModel):
     """What happens when the open hand at its start pose would interpenetrate the object."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     on_interpenetration: Literal["back_off", "infeasible"] = "back_off"
     backoff_step_m: float = Field(default=0.005, gt=0.0, le=0.05)
@@ -35,7 +35,7 @@ class PlacementSettings(BaseModel):
 class BaselinePolicySettings(BaseModel):
     """G_c: a constant force toward x_c, then a constant closing torque until motion halts."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     approach_force_n: float = Field(default=6.0, gt=0.0, le=200.0)
     approach_speed_cap_m_s: float = Field(
@@ -61,7 +61,7 @@ class BaselinePolicySettings(BaseModel):
 class TrajectorySpec(BaseModel):
     """The reference task: lift, move sideways and turn, with minimum-jerk timing."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     settle_s: float = Field(
         default=0.1, ge=0.0, le=2.0,
@@ -81,7 +81,7 @@ class TrajectorySpec(BaseModel):
 class MetricSettings(BaseModel):
     """How μs is measured: see docs/metric.md for why each value."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     instants: int = Field(default=4, ge=1, le=50, description="sampled instants along the task")
     window_steps: int = Field(default=8, ge=1, le=100, description="probe window (the paper's ±ε)")
@@ -95,7 +95,7 @@ class MetricSettings(BaseModel):
 
 
 class SimSettings(BaseModel):
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     policy_name: str = Field(default="baseline", pattern=r"^[a-z][a-z0-9_]*$",
                              description="grasp synthesis policy (workers/sim/policies)")

@@ -104,7 +104,8 @@ def _spec(**changes: Any) -> dict[str, Any]:
         (_spec(object_id=999), "object_id 999 does not exist"),
         (_spec(object_id=0), "object_id"),
         (_spec(gripper="bad name!"), "gripper"),
-        (_spec(policy=""), "policy"),
+        (_spec(settings__policy_name="nope"), "unknown policy 'nope'"),
+        (_spec(gripper="no_such_gripper"), "unknown gripper"),
         (_spec(grid__dtheta=0.001), "dtheta"),
         (_spec(grid__dtheta=2.0), "dtheta"),
         (_spec(grid__r_min=0.05, grid__r_max=0.01), "r_max (0.01) must not be below r_min"),
@@ -113,8 +114,9 @@ def _spec(**changes: Any) -> dict[str, Any]:
         (_spec(grid__attitudes__rolls=3), "rolls"),
         (_spec(grid__attitudes__tilts=[1.0]), "tilt 1.0 must be in"),
         (_spec(grid__attitudes__tilts=[0.1, 0.1]), "distinct"),
-        (_spec(trajectory__kind="spin"), "kind"),
-        (_spec(trajectory__duration_s=0), "duration_s"),
+        (_spec(settings__trajectory__spin=1), "spin"),
+        (_spec(settings__trajectory__duration_s=0), "duration_s"),
+        (_spec(settings__physics__solver_iterations=0), "solver_iterations"),
         (_spec(refinement__levels=9), "levels"),
         (_spec(colour="red"), "colour"),
         (_spec(grid__dtheta=0.05, grid__attitudes__rolls=8), "more than the limit"),
@@ -287,7 +289,7 @@ def test_healthz_and_metrics(
 
 
 def test_service_refusals_use_the_validation_error_shape(client: TestClient) -> None:
-    response = client.post("/explorations", json={"object_id": 77, "gripper": "g"})
+    response = client.post("/explorations", json={"object_id": 77, "gripper": "robotiq_3f"})
     assert response.status_code == 422
     (error,) = response.json()["detail"]
     assert error["loc"] == ["body", "object_id"] and error["type"] == "value_error"

@@ -133,6 +133,9 @@ def test_bearer_token_guards_mutating_routes(settings: Settings, tmp_path: Path)
         ok = c.post("/objects", data={"name": "cube"}, headers={"Authorization": "Bearer s3cret"})
         assert ok.status_code == 201
         assert c.get("/objects").status_code == 200  # reads stay open
-        assert c.post("/explorations", json={"object_id": 1, "gripper": "g"}).status_code == 401
+        assert (
+            c.post("/explorations", json={"object_id": 1, "gripper": "robotiq_3f"}).status_code
+            == 401
+        )
         assert c.post("/explorations/1/cancel").status_code == 401
         assert c.delete("/explorations/1").status_code == 401

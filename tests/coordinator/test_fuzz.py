@@ -41,7 +41,7 @@ def test_no_input_gives_a_server_error(settings: Settings, sessions: object) -> 
         for _ in range(3):
             client.post(
                 "/explorations",
-                json={"object_id": object_id, "gripper": "g", "grid": {"dtheta": 1.0}},
+                json={"object_id": object_id, "gripper": "robotiq_3f", "grid": {"dtheta": 1.0}},
             )
         schema = schemathesis.openapi.from_asgi("/openapi.json", app)
         operations = [result.ok() for result in schema.get_all_operations()]

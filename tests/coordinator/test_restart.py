@@ -144,7 +144,8 @@ def test_the_running_app_sweeps_expired_leases(
     with TestClient(create_app(fast)) as client:
         object_id = client.post("/objects", data={"name": "cube"}).json()["id"]
         eid = client.post(
-            "/explorations", json={"object_id": object_id, "gripper": "g", "grid": {"dtheta": 1.0}}
+            "/explorations",
+            json={"object_id": object_id, "gripper": "robotiq_3f", "grid": {"dtheta": 1.0}},
         ).json()["id"]
         with sessions() as s:
             lease_tiles(s, worker_id="w", n=2, lease_seconds=0.3)
