@@ -63,3 +63,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _pose_args(rp)
     rp.add_argument("--out", type=Path, default=Path("grasp.png"), help="PNG file to write")
     rp.set_defaults(handler=_render_pose)
+    from graspscape.workers.sim.compare_policies import register_compare
+    register_compare(subparsers)

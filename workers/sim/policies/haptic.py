@@ -23,8 +23,9 @@ Both iterations are closed loops on the live simulation: each update is sent to 
 (force-capped like G_c's approach) and the joint position motors, the physics runs a few steps,
 and the next Jacobian is estimated at the pose actually reached. Jacobians are finite
 differences of the sensor model: a probe teleports one joint (or the base) with resetJointState
-(resetBasePositionAndOrientation), reads the distances and puts the exact positions and
-velocities back, so probing never changes what the simulation does next (a test checks it).
+(resetBasePositionAndOrientation), reads the distances and puts the exact state back (joint
+positions and velocities; for the base, a saved state), so probing never changes what the
+simulation does next (a test checks it bit for bit).
 Probe readings are noise-free: the Jacobian stands for the local surface model a real
 controller would fit; the noise enters the readings that set the targets.
 """
@@ -70,25 +71,18 @@ class ProximitySensors:
         return np.minimum(distances, self.range)
 
 
-class HandState:
-    """Exact positions and velocities of the hand, to put back after a probe."""
+class JointState:
+    """Exact positions and velocities of the hand's joints, to put back after a probe
+    (resetJointState restores them bit for bit; a test checks the rollout is unchanged)."""
 
     def __init__(self, hand) -> None:
-        cid = hand.client
         self.hand = hand
-        self.base = p.getBasePositionAndOrientation(hand.body, physicsClientId=cid)
-        self.velocity = p.getBaseVelocity(hand.body, physicsClientId=cid)
-        self.joints = {j: p.getJointState(hand.body, j, physicsClientId=cid)[:2]
+        self.joints = {j: p.getJointState(hand.body, j, physicsClientId=hand.client)[:2]
                        for j in hand.movable}
 
-    def restore_joint(self, joint: int) -> None:
+    def restore(self, joint: int) -> None:
         q, qd = self.joints[joint]
         p.resetJointState(self.hand.body, joint, q, qd, physicsClientId=self.hand.client)
-
-    def restore_base(self) -> None:
-        cid, body = self.hand.client, self.hand.body
-        p.resetBasePositionAndOrientation(body, *self.base, physicsClientId=cid)
-        p.resetBaseVelocity(body, *self.velocity, physicsClientId=cid)
 
 
 def _descendants(hand) -> dict[int, list[int]]:
@@ -103,7 +97,7 @@ def _descendants(hand) -> dict[int, list[int]]:
 def joint_jacobian(sensors: ProximitySensors, joints: list[int], step: float) -> np.ndarray:
     """∂d/∂θ (rows: sensing links, columns: joints) by forward differences."""
     hand = sensors.hand
-    state = HandState(hand)
+    state = JointState(hand)
     moved = _descendants(hand)
     base = sensors.exact()
     jac = np.zeros((len(sensors.links), len(joints)))
@@ -118,7 +112,7 @@ def joint_jacobian(sensors: ProximitySensors, joints: list[int], step: float) ->
         for link, value in zip(links, probe, strict=True):
             row = sensors.index[link]
             jac[row, col] = (value - base[row]) / h
-        state.restore_joint(joint)
+        state.restore(joint)
     return jac
 
 
@@ -126,7 +120,10 @@ def base_jacobian(sensors: ProximitySensors, step_m: float, step_rad: float) -> 
     """∂d/∂η_r: world translations of the gripper frame, then rotations about world axes
     through the palm centre (rows: sensing links)."""
     hand = sensors.hand
-    state = HandState(hand)
+    # Putting the base back with resetBasePositionAndOrientation is off by ~1e-13 (pybullet
+    # converts between the link and inertial frames), enough to change a later contact-rich
+    # rollout: the whole state is saved and restored instead (~1 ms).
+    saved = p.saveState(physicsClientId=hand.client)
     base = sensors.exact()
     frame_pos, frame_rot = hand.frame_pose()
     jac = np.zeros((len(sensors.links), 6))
@@ -141,7 +138,8 @@ def base_jacobian(sensors: ProximitySensors, step_m: float, step_rad: float) -> 
         com, orn = hand.com_pose_for(pos, rot)
         p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=hand.client)
         jac[:, col] = (sensors.exact() - base) / h
-        state.restore_base()
+    p.restoreState(saved, physicsClientId=hand.client)
+    p.removeState(saved, physicsClientId=hand.client)
     return jac
 
 
