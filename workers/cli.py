@@ -1,4 +1,4 @@
-"""Worker-side subcommands: evaluate or picture one pose."""
+"""Worker-side subcommands: evaluate or picture one pose; `worker` pulls tiles over zenoh."""
 
 from __future__ import annotations
 
@@ -65,3 +65,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     rp.set_defaults(handler=_render_pose)
     from graspscape.workers.sim.compare_policies import register_compare
     register_compare(subparsers)
+    from graspscape.workers.runtime.cli import register_worker
+    register_worker(subparsers)

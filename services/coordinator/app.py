@@ -2,7 +2,8 @@
 
 `create_app(settings)` builds an independent app (tests make one per database); the lease
 sweeper puts expired leases back in the queue at start (so a restart recovers the tiles of
-workers that died meanwhile) and then every requeue_interval_s.
+workers that died meanwhile) and then every requeue_interval_s. With `settings.zenoh.enabled`
+the lifespan also runs the zenoh dispatch (services/coordinator/dispatch).
 """
 
 from __future__ import annotations
@@ -49,9 +50,21 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     except Exception:  # e.g. not migrated yet: /healthz reports it, the sweeper retries
         log.exception("initial lease sweep failed")
     task = asyncio.create_task(_sweeper(app))
+    dispatcher = None
+    if app.state.settings.zenoh.enabled:
+        # Imported here so that an app without dispatch never loads zenoh.
+        from graspscape.services.coordinator.dispatch.service import Dispatcher
+
+        dispatcher = Dispatcher(
+            app.state.settings, app.state.sessionmaker, app.state.metrics.registry
+        )
+        await run_in_threadpool(dispatcher.start)
+    app.state.dispatcher = dispatcher
     try:
         yield
     finally:
+        if dispatcher is not None:
+            await run_in_threadpool(dispatcher.stop)
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task

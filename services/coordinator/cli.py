@@ -1,4 +1,4 @@
-"""`graspscape serve` and `graspscape db upgrade|current`: the coordinator's subcommands.
+"""`graspscape serve`, `explore` and `db upgrade|current`: the coordinator's subcommands.
 
 Imports of FastAPI, uvicorn and Alembic stay inside the handlers so `graspscape --help` is
 instant.
@@ -7,6 +7,7 @@ instant.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def _settings(args: argparse.Namespace):  # -> Settings
@@ -22,6 +23,19 @@ def _settings(args: argparse.Namespace):  # -> Settings
         }.items()
         if v is not None
     }
+    zenoh = {
+        k: v
+        for k, v in {
+            "enabled": getattr(args, "dispatch", None),
+            "mode": getattr(args, "zenoh_mode", None),
+            "listen": getattr(args, "zenoh_listen", None),
+            "connect": getattr(args, "zenoh_connect", None),
+        }.items()
+        if v is not None
+    }
+    if zenoh:
+        # Nested values merge with the config file's [zenoh] section key by key.
+        overrides["zenoh"] = zenoh
     return Settings(**overrides)
 
 
@@ -41,6 +55,26 @@ def _serve(args: argparse.Namespace) -> int:
         create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level
     )
     return 0
+
+
+def _explore(args: argparse.Namespace) -> int:
+    from graspscape.services.coordinator.dispatch.explore import ExploreOptions, run_explore
+
+    options = {
+        "object": args.object,
+        "gripper": args.gripper,
+        "dtheta_deg": args.dtheta,
+        "r_min": args.r_min,
+        "r_max": args.r_max,
+        "dr": args.dr,
+        "rolls": args.rolls,
+        "procs": args.procs,
+        "data_dir": args.data_dir,
+        "mass_kg": args.mass,
+        "friction": args.friction,
+        "quiet": args.quiet,
+    }
+    return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
 
 
 def _db_upgrade(args: argparse.Namespace) -> int:
@@ -82,7 +116,61 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     serve.add_argument(
         "--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"]
     )
+    serve.add_argument(
+        "--no-dispatch",
+        dest="dispatch",
+        action="store_false",
+        default=True,
+        help="REST API only: no zenoh dispatch to workers",
+    )
+    serve.add_argument(
+        "--zenoh-mode", choices=["peer", "client"], help="peer (embedded, default) or client"
+    )
+    serve.add_argument(
+        "--zenoh-listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="endpoint the embedded peer listens on (repeatable; default tcp/127.0.0.1:7447)",
+    )
+    serve.add_argument(
+        "--zenoh-connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="zenoh router to connect to, e.g. tcp/router:7447 (repeatable)",
+    )
     serve.set_defaults(handler=_serve)
+
+    from graspscape.services.coordinator.dispatch.explore_defaults import (
+        DEFAULT_DTHETA_DEG,
+        DEFAULT_R,
+    )
+
+    explore = subparsers.add_parser(
+        "explore",
+        help="explore an object on this machine: coordinator (SQLite) + local workers",
+    )
+    explore.add_argument(
+        "object", help="built-in name (sphere, cube, mug, ...), pb:<name>, ycb:<Folder> or a "
+        "mesh file"
+    )
+    explore.add_argument("--gripper", help="gripper spec name (default robotiq_3f)")
+    explore.add_argument(
+        "--dtheta",
+        type=float,
+        help=f"angle between approach directions, degrees (default {DEFAULT_DTHETA_DEG:g})",
+    )
+    explore.add_argument("--r-min", type=float, help=f"smallest start gap, m ({DEFAULT_R[0]})")
+    explore.add_argument("--r-max", type=float, help=f"largest start gap, m ({DEFAULT_R[1]})")
+    explore.add_argument("--dr", type=float, help=f"start gap step, m ({DEFAULT_R[2]})")
+    explore.add_argument("--rolls", type=int, choices=[1, 2, 4, 8], help="rolls per point (1)")
+    explore.add_argument("--procs", type=int, help="worker processes (default: cores)")
+    explore.add_argument(
+        "--data-dir", type=Path, help="folder of the database and results (default data)"
+    )
+    explore.add_argument("--mass", type=float, help="object mass, kg")
+    explore.add_argument("--friction", type=float, help="object friction coefficient")
+    explore.add_argument("--quiet", action="store_true", help="no progress bar")
+    explore.set_defaults(handler=_explore)
 
     database = subparsers.add_parser("db", help="coordinator database schema")
     actions = database.add_subparsers(dest="db_command", required=True, metavar="ACTION")

@@ -11,8 +11,9 @@ from __future__ import annotations
 import os
 from functools import lru_cache
 from pathlib import Path
+from typing import Literal
 
-from pydantic import Field, SecretStr, field_validator
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -24,8 +25,37 @@ CONFIG_ENV = "GRASPSCAPE_CONFIG"
 DEFAULT_CONFIG = Path("configs/coordinator.toml")
 
 
+class ZenohSettings(BaseModel):
+    """Dispatch over zenoh (`[zenoh]` in the TOML, GRASPSCAPE_ZENOH__<KEY> in the env)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    # Off for a bare create_app (tests, tools) so that it opens no network port; `graspscape
+    # serve` and `explore` switch it on unless told --no-dispatch.
+    enabled: bool = Field(default=False, description="serve workers over zenoh")
+    mode: Literal["peer", "client"] = Field(
+        default="peer", description="peer: embedded (listens); client: through a router only"
+    )
+    listen: list[str] = Field(
+        default=["tcp/127.0.0.1:7447"],
+        description="endpoints the embedded peer listens on; tcp/0.0.0.0:7447 for other hosts",
+    )
+    connect: list[str] = Field(
+        default=[], description="zenoh router endpoints to connect to (multi-host deployment)"
+    )
+    handler_threads: int = Field(default=4, ge=1, le=64, description="threads serving queries")
+    max_tiles_per_request: int = Field(default=8, ge=1, le=64)
+    orphan_grace_s: float = Field(
+        default=10.0,
+        ge=0.0,
+        description="after start, leases of workers not alive by then go back to the queue",
+    )
+
+
 class Settings(BaseSettings):
-    model_config = SettingsConfigDict(env_prefix="GRASPSCAPE_", extra="ignore")
+    model_config = SettingsConfigDict(
+        env_prefix="GRASPSCAPE_", env_nested_delimiter="__", extra="ignore"
+    )
 
     data_dir: Path = Field(default=Path("data"), description="folder of the embedded database")
     database_url: str | None = Field(
@@ -47,6 +77,7 @@ class Settings(BaseSettings):
     tile_target_poses: int = Field(default=100, ge=1, le=10_000, description="poses per tile")
     max_poses_per_exploration: int = Field(default=5_000_000, ge=1)
     throughput_window_s: float = Field(default=60.0, gt=0, description="window of poses/s")
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
     @field_validator("api_token", "database_url", "shared_objects_dir", mode="before")
     @classmethod

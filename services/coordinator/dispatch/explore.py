@@ -1,0 +1,199 @@
+"""`graspscape explore OBJECT`: one machine, one command. The embedded default deployment.
+
+Runs the coordinator's store (SQLite under the data folder) and dispatch in this process and
+N local worker processes that connect to it over loopback zenoh, exactly as remote workers
+would; shows a progress bar and prints where the results are. Running the same command again
+resumes an unfinished exploration of the same spec instead of starting over.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import socket
+import sys
+import time
+from pathlib import Path
+
+from graspscape.services.coordinator import db
+from graspscape.services.coordinator.dispatch.explore_defaults import DEFAULT_DTHETA_DEG, DEFAULT_R
+from graspscape.services.coordinator.dispatch.leases import requeue_lost
+from graspscape.services.coordinator.dispatch.service import Dispatcher
+from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.objects.service import create_named, create_uploaded
+from graspscape.services.coordinator.settings import Settings, ZenohSettings
+from graspscape.services.coordinator.store.models import (
+    ExplorationRow,
+    ExplorationStatus,
+    PoseRow,
+    TileRow,
+    TileState,
+)
+from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
+from graspscape.workers.runtime.config import WorkerConfig, default_procs
+from graspscape.workers.runtime.supervisor import Supervisor
+from pydantic import BaseModel, Field
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, sessionmaker
+
+
+class ExploreOptions(BaseModel):
+    object: str
+    gripper: str = "robotiq_3f"
+    dtheta_deg: float = Field(default=DEFAULT_DTHETA_DEG, gt=0.5, le=90)
+    r_min: float = DEFAULT_R[0]
+    r_max: float = DEFAULT_R[1]
+    dr: float = DEFAULT_R[2]
+    rolls: int = 1
+    procs: int = Field(default_factory=default_procs, ge=1)
+    data_dir: Path = Path("data")
+    mass_kg: float | None = None
+    friction: float | None = None
+    quiet: bool = False
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _object_id(session: Session, opts: ExploreOptions) -> int:
+    props = {k: v for k, v in {"mass_kg": opts.mass_kg, "friction": opts.friction}.items()
+             if v is not None}
+    path = Path(opts.object)
+    if path.suffix and path.is_file():
+        row, _ = create_uploaded(session, filename=path.name, data=path.read_bytes(),
+                                 properties=props)
+    else:
+        row, _ = create_named(session, name=opts.object, properties=props, shared_dir=None)
+    return row.id
+
+
+def _exploration(session: Session, spec: ExplorationSpec, settings: Settings) -> tuple[int, bool]:
+    """The unfinished exploration of this very spec (resumed), or a new one."""
+    wanted = spec.model_dump(mode="json")
+    for row in session.scalars(
+        select(ExplorationRow).where(
+            ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING))
+        )
+    ):
+        if row.spec == wanted:
+            return row.id, True
+    row = create_exploration(session, spec=spec, tile_target_poses=settings.tile_target_poses,
+                             max_poses=settings.max_poses_per_exploration)
+    return row.id, False
+
+
+def _bar(done: int, total: int, viable: int, rate: float, width: int = 30) -> str:
+    frac = done / total if total else 1.0
+    filled = int(frac * width)
+    eta = f"{(total - done) / rate:5.0f} s" if rate > 0 else "    ? s"
+    return (f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} poses "
+            f"{100 * frac:5.1f} %  viable {viable}  {rate:5.1f} poses/s  ETA {eta}")
+
+
+def _export_csv(session: Session, exploration_id: int, path: Path) -> int:
+    columns = ("pose_key", "theta", "phi", "r", "roll", "pitch", "yaw", "outcome", "viable",
+               "mu_s", "effort_max_nm", "eval_time_s")
+    rows = session.execute(
+        select(*(getattr(PoseRow, c) for c in columns))
+        .where(PoseRow.exploration_id == exploration_id)
+        .order_by(PoseRow.pose_key)
+    ).all()
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(columns)
+        writer.writerows(rows)
+    return len(rows)
+
+
+def run_explore(opts: ExploreOptions) -> int:
+    data_dir = opts.data_dir.resolve()
+    data_dir.mkdir(parents=True, exist_ok=True)
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    settings = Settings(
+        data_dir=data_dir,
+        database_url=f"sqlite:///{(data_dir / 'coordinator.db').as_posix()}",
+        zenoh=ZenohSettings(enabled=True, mode="peer", listen=[endpoint], connect=[]),
+    )
+    url = settings.resolved_database_url
+    db.upgrade(url)
+    engine = db.make_engine(url)
+    sessions: sessionmaker[Session] = db.make_sessionmaker(engine)
+    spec = ExplorationSpec(
+        object_id=1,  # replaced below, once the object is stored
+        gripper=opts.gripper,
+        grid=PoseGridSpec(dtheta=math.radians(opts.dtheta_deg), r_min=opts.r_min,
+                          r_max=opts.r_max, dr=opts.dr, attitudes={"rolls": opts.rolls}),
+        refinement=RefinementSpec(levels=0),
+        label=f"graspscape explore {opts.object}",
+    )
+    with sessions() as session:
+        spec = spec.model_copy(update={"object_id": _object_id(session, opts)})
+        exploration_id, resumed = _exploration(session, spec, settings)
+        # Every worker of this command starts now, so any lease still held is an orphan of
+        # an earlier, interrupted run.
+        requeue_lost(session, alive=[], max_attempts=settings.max_attempts)
+        total = session.scalar(
+            select(ExplorationRow.poses_total).where(ExplorationRow.id == exploration_id))
+    say = (lambda *a: None) if opts.quiet else (lambda msg: print(msg, file=sys.stderr))
+    say(f"{'resuming' if resumed else 'exploration'} {exploration_id}: {total} poses of "
+        f"{opts.object} with {opts.gripper}, {opts.procs} worker processes")
+
+    dispatcher = Dispatcher(settings, sessions)
+    dispatcher.start()
+    if not dispatcher.ready:
+        dispatcher.stop()
+        raise RuntimeError(f"could not open the zenoh peer on {endpoint}")
+    supervisor = Supervisor(
+        WorkerConfig(connect=[endpoint], procs=opts.procs, name="explore"), log_level="warning"
+    )
+    started = time.monotonic()
+    status = ExplorationStatus.RUNNING
+    interrupted = False
+    try:
+        supervisor.start()
+        first_done: tuple[float, int] | None = None
+        while True:
+            supervisor.poll()
+            with sessions() as session:
+                row = session.get(ExplorationRow, exploration_id)
+                assert row is not None
+                status, done, total, viable = (row.status, row.poses_done, row.poses_total,
+                                               row.viable_count)
+            now = time.monotonic()
+            if first_done is None and done > 0:
+                first_done = (now, done)  # rate from the first result: start-up excluded
+            rate = ((done - first_done[1]) / (now - first_done[0])
+                    if first_done and now > first_done[0] else 0.0)
+            if not opts.quiet:
+                print(_bar(done, total, viable, rate), end="", file=sys.stderr, flush=True)
+            if status in (ExplorationStatus.DONE, ExplorationStatus.CANCELLED):
+                break
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        interrupted = True
+        say("\ninterrupted: workers finish their pose and hand the rest back ...")
+    finally:
+        supervisor.shutdown()  # while the dispatch still runs, so releases are acknowledged
+        dispatcher.stop()
+    elapsed = time.monotonic() - started
+    with sessions() as session:
+        failed = session.scalar(
+            select(func.count()).select_from(TileRow).where(
+                TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED))
+        csv_path = data_dir / f"exploration-{exploration_id}.csv"
+        n = _export_csv(session, exploration_id, csv_path)
+    engine.dispose()
+    say("")
+    if interrupted:
+        say(f"stopped after {elapsed:.0f} s with {n} poses stored; run the same command again "
+            "to resume")
+    else:
+        say(f"{status}: {n} poses in {elapsed:.0f} s, {failed} tiles failed")
+    print(f"results: {csv_path}")
+    print(f"database: {data_dir / 'coordinator.db'} (exploration {exploration_id}); browse with "
+          f"`graspscape serve --data-dir {data_dir}` and GET "
+          f"/explorations/{exploration_id}/poses")
+    return 130 if interrupted else (0 if status == ExplorationStatus.DONE and not failed else 1)

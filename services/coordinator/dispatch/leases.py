@@ -1,0 +1,124 @@
+"""Queue moves the dispatch needs beyond store/queue.py: give back a worker's leases.
+
+Three cases, each one conditional UPDATE (atomic against the sweeper and a re-lease):
+- a worker hands a tile back on shutdown, or a lease reply never reached it: not the tile's
+  fault, so the attempt is not counted;
+- a worker's liveliness token vanished (crash, kill -9, lost host): counted like an expired
+  lease, so a tile that crashes every worker ends `failed` after max_attempts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+from datetime import datetime
+
+from graspscape.services.coordinator.store.base import utcnow
+from graspscape.services.coordinator.store.models import TileRow, TileState
+from graspscape.services.coordinator.store.queue import finish_complete_explorations
+from sqlalchemy import literal, select, update
+from sqlalchemy.orm import Session
+
+
+def release_tile(
+    session: Session, *, tile_id: int, lease_epoch: int, now: datetime | None = None
+) -> bool:
+    """Put a tile back in the queue under its current lease, uncounted; False if not held."""
+    now = now or utcnow()
+    result = session.execute(
+        update(TileRow)
+        .where(
+            TileRow.id == tile_id,
+            TileRow.state == TileState.LEASED,
+            TileRow.lease_epoch == lease_epoch,
+        )
+        .values(
+            state=TileState.QUEUED,
+            attempts=TileRow.attempts - 1,
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        )
+        .execution_options(synchronize_session=False)
+    )
+    session.commit()
+    return result.rowcount == 1  # type: ignore[attr-defined]
+
+
+def release_unheld(
+    session: Session, *, worker_id: str, holding: Collection[int], now: datetime | None = None
+) -> int:
+    """Tiles leased to a worker that says it does not hold them: their lease reply was lost."""
+    now = now or utcnow()
+    stmt = update(TileRow).where(
+        TileRow.state == TileState.LEASED, TileRow.lease_owner == worker_id
+    )
+    if holding:
+        stmt = stmt.where(TileRow.id.not_in(list(holding)))
+    result = session.execute(
+        stmt.values(
+            state=TileState.QUEUED,
+            attempts=TileRow.attempts - 1,
+            last_error=literal("lease reply lost on the way to ") + TileRow.lease_owner,
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        ).execution_options(synchronize_session=False)
+    )
+    session.commit()
+    return result.rowcount  # type: ignore[attr-defined]
+
+
+def requeue_lost(
+    session: Session,
+    *,
+    worker_ids: Collection[str] | None = None,
+    alive: Collection[str] | None = None,
+    max_attempts: int,
+    now: datetime | None = None,
+) -> tuple[int, int]:
+    """Leases of lost workers back to the queue (failed at the cap): (requeued, failed).
+
+    Lost means `worker_ids` (their tokens vanished), or every owner not in `alive` (the sweep
+    after a coordinator start).
+    """
+    now = now or utcnow()
+    owned = [TileRow.state == TileState.LEASED]
+    if worker_ids is not None:
+        owned.append(TileRow.lease_owner.in_(list(worker_ids)))
+    if alive is not None:
+        owned.append(TileRow.lease_owner.not_in(list(alive)) if alive else literal(True))
+    failed = session.execute(
+        update(TileRow)
+        .where(*owned, TileRow.attempts >= max_attempts)
+        .values(
+            state=TileState.FAILED,
+            last_error=literal("worker ") + TileRow.lease_owner + literal(" lost on last attempt"),
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        )
+        .returning(TileRow.exploration_id)
+        .execution_options(synchronize_session=False)
+    ).all()
+    requeued = session.execute(
+        update(TileRow)
+        .where(*owned)
+        .values(
+            state=TileState.QUEUED,
+            last_error=literal("worker ") + TileRow.lease_owner + literal(" lost"),
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        )
+        .execution_options(synchronize_session=False)
+    )
+    finish_complete_explorations(session, {row[0] for row in failed}, now=now)
+    session.commit()
+    return requeued.rowcount, len(failed)  # type: ignore[attr-defined]
+
+
+def lease_owners(session: Session) -> set[str]:
+    rows = session.scalars(
+        select(TileRow.lease_owner).where(TileRow.state == TileState.LEASED).distinct()
+    )
+    return {owner for owner in rows if owner}

@@ -1,0 +1,354 @@
+"""The Dispatcher: one zenoh session in the coordinator, serving workers from the store.
+
+Zenoh callbacks only enqueue (a full queue is answered "unavailable" at once); a pool of
+handler threads does the database work and replies inside the query's context (`with query`),
+so the final reply goes out as soon as the answer is complete. Nothing raised while serving a
+query escapes: bad input gets an error reply, store failures an "unavailable" reply the
+worker retries, and both are logged and counted.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from typing import Any
+
+import zenoh
+from graspscape.services.coordinator.dispatch.catalog import Catalog, mesh_by_hash
+from graspscape.services.coordinator.dispatch.counters import DispatchCounters
+from graspscape.services.coordinator.dispatch.leases import (
+    lease_owners,
+    release_tile,
+    release_unheld,
+    requeue_lost,
+)
+from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.settings import Settings
+from graspscape.services.coordinator.store.ingest import ingest_results
+from graspscape.services.coordinator.store.queue import fail_tile, lease_tiles
+from graspscape.shared.wire import keys
+from graspscape.shared.wire.codec import decode_as, encode, error
+from graspscape.shared.wire.messages import (
+    Ack,
+    ErrorCode,
+    ErrorReply,
+    LeaseRequest,
+    ObjectData,
+    ObjectRequest,
+    ResultBatch,
+    TileLease,
+)
+from graspscape.shared.wire.session import zenoh_config
+from prometheus_client import CollectorRegistry
+from sqlalchemy.orm import Session, sessionmaker
+
+log = logging.getLogger("graspscape.dispatch")
+
+_QUEUE_SIZE = 2048
+_STOP = object()
+
+
+class Dispatcher:
+    def __init__(
+        self,
+        settings: Settings,
+        sessions: sessionmaker[Session],
+        registry: CollectorRegistry | None = None,
+    ) -> None:
+        self.settings = settings
+        self.zs = settings.zenoh
+        self.sessions = sessions
+        self.counters = DispatchCounters(registry)
+        self.catalog = Catalog()
+        self._work: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
+        self._threads: list[threading.Thread] = []
+        self._session: zenoh.Session | None = None
+        self._declared: list[Any] = []
+        self._stopping = threading.Event()
+        self.started_at = 0.0
+
+    # -- lifecycle -----------------------------------------------------------------------
+
+    @property
+    def ready(self) -> bool:
+        return self._session is not None
+
+    def start(self) -> None:
+        """Open the session and declare everything, or keep retrying in the background.
+
+        A listen endpoint that is taken (another coordinator on this host) must not take the
+        REST API down with it: the failure is logged and counted, and retried every few s.
+        """
+        self.started_at = time.monotonic()
+        try:
+            self._open()
+        except Exception as exc:
+            self.counters.errors.labels("session", "open").inc()
+            log.error("zenoh session could not open (%s); retrying in the background", exc)
+            retry = threading.Thread(target=self._retry_open, name="dispatch-open", daemon=True)
+            retry.start()
+            self._threads.append(retry)
+
+    def _retry_open(self) -> None:
+        while not self._stopping.wait(5.0):
+            try:
+                self._open()
+                return
+            except Exception as exc:
+                self.counters.errors.labels("session", "open").inc()
+                log.error("zenoh session could not open (%s); retrying", exc)
+
+    def _open(self) -> None:
+        # A client only connects (to routers); only the embedded peer listens.
+        listen = self.zs.listen if self.zs.mode == "peer" else []
+        session = zenoh.open(
+            zenoh_config(mode=self.zs.mode, listen=listen, connect=self.zs.connect)
+        )
+        self._session = session
+        for _ in range(self.zs.handler_threads):
+            thread = threading.Thread(target=self._serve, name="dispatch", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        s = self._session
+        self._declared = [
+            s.declare_queryable(keys.LEASE_QUERYABLE, self._enqueue("lease")),
+            s.declare_queryable(keys.RESULTS_QUERYABLE, self._enqueue("results")),
+            s.declare_queryable(keys.OBJECT_QUERYABLE, self._enqueue("object")),
+            # history: tokens of workers that were there before this coordinator started.
+            s.liveliness().declare_subscriber(keys.ALIVE_ALL, self._on_alive, history=True),
+        ]
+        sweeper = threading.Thread(target=self._orphan_sweep, name="dispatch-orphans", daemon=True)
+        sweeper.start()
+        self._threads.append(sweeper)
+        log.info(
+            "dispatch up: zenoh %s, listen %s, connect %s",
+            self.zs.mode,
+            self.zs.listen,
+            self.zs.connect,
+        )
+
+    def stop(self) -> None:
+        self._stopping.set()
+        for entity in self._declared:
+            try:
+                entity.undeclare()
+            except Exception:  # already gone with a closing session
+                log.debug("undeclare failed", exc_info=True)
+        self._declared = []
+        for _ in list(self._threads):
+            try:
+                self._work.put(_STOP, timeout=1)
+            except queue.Full:
+                break
+        for thread in list(self._threads):
+            thread.join(timeout=5)
+        self._threads = []
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+
+    # -- callbacks: enqueue only -----------------------------------------------------------
+
+    def _enqueue(self, kind: str):
+        def callback(query: zenoh.Query) -> None:
+            try:
+                self._work.put_nowait((kind, query))
+            except queue.Full:
+                self.counters.errors.labels(kind, "busy").inc()
+                with query:
+                    query.reply_err(encode(error(ErrorCode.UNAVAILABLE, "coordinator busy")))
+            except Exception:
+                self.counters.errors.labels(kind, "callback").inc()
+                log.exception("%s callback failed", kind)
+
+        return callback
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        try:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self._work.put(("lost", str(sample.key_expr)), timeout=5)
+        except Exception:
+            self.counters.errors.labels("liveliness", "callback").inc()
+            log.exception("liveliness callback failed")
+
+    # -- handler threads -------------------------------------------------------------------
+
+    def _serve(self) -> None:
+        while True:
+            item = self._work.get()
+            if item is _STOP:
+                return
+            kind, payload = item
+            try:
+                if kind == "lost":
+                    self._lost(payload)
+                    continue
+                with payload:  # the final reply goes out when the query is dropped
+                    self._answer(kind, payload)
+            except Exception:
+                self.counters.errors.labels(kind, "handler").inc()
+                log.exception("serving a %s query failed", kind)
+
+    def _answer(self, kind: str, query: zenoh.Query) -> None:
+        data = query.payload.to_bytes() if query.payload is not None else b""
+        handler = {"lease": self._lease, "results": self._results, "object": self._object}[kind]
+        try:
+            reply = handler(query, data)
+        except Exception as exc:  # the store failed (database down, lock timeout, ...)
+            log.exception("%s query failed", kind)
+            reply = error(ErrorCode.UNAVAILABLE, f"{type(exc).__name__}: {exc}")
+        if isinstance(reply, ErrorReply):
+            self.counters.queries.labels(kind, "error").inc()
+            self.counters.errors.labels(kind, reply.code.value).inc()
+            log.warning("%s query refused (%s): %s", kind, reply.code.value, reply.message)
+            query.reply_err(encode(reply))
+        else:
+            self.counters.queries.labels(kind, "ok").inc()
+
+    def _lease(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:
+        request = decode_as(data, LeaseRequest)
+        if isinstance(request, ErrorReply):
+            return request
+        n = min(request.capacity, self.zs.max_tiles_per_request)
+        with self.sessions() as session:
+            lost = release_unheld(session, worker_id=request.worker_id, holding=request.holding)
+            if lost:
+                self.counters.tiles_requeued.labels("reply_lost").inc(lost)
+                log.info("%d tiles of %s whose lease reply was lost: queued again",
+                         lost, request.worker_id)
+            tiles = lease_tiles(
+                session,
+                worker_id=request.worker_id,
+                n=n,
+                lease_seconds=self.settings.lease_seconds,
+                host=request.host,
+                capacity=request.capacity,
+            )
+            contexts = [self.catalog.context(session, t.exploration_id) for t in tiles]
+        for tile, ctx in zip(tiles, contexts, strict=True):
+            message = TileLease(
+                **tile.model_dump(),
+                object=ctx.object,
+                gripper=ctx.gripper,
+                settings=ctx.settings,
+            )
+            query.reply(keys.lease_reply_key(tile.tile_id), encode(message))
+        self.counters.tiles_leased.inc(len(tiles))
+        return None  # no tile: the empty answer tells the worker to back off
+
+    def _results(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:
+        batch = decode_as(data, ResultBatch)
+        if isinstance(batch, ErrorReply):
+            return batch
+        self.counters.poses_received.inc(len(batch.results))
+        with self.sessions() as session:
+            try:
+                report = ingest_results(
+                    session,
+                    tile_id=batch.tile_id,
+                    lease_epoch=batch.lease_epoch,
+                    worker_id=batch.worker_id,
+                    results=batch.results,
+                    final=batch.final and batch.error is None,
+                )
+            except NotFound:
+                # Its exploration was deleted: the results have no home, and a retry never
+                # will; acknowledging ends the worker's retries.
+                ack = Ack(tile_id=batch.tile_id, lease_epoch=batch.lease_epoch, inserted=0,
+                          duplicates=0, tile_state="deleted")
+                query.reply(str(query.key_expr), encode(ack))
+                return None
+            except InvalidInput as exc:
+                return error(ErrorCode.INVALID, exc.message)
+            state = report.tile_state
+            if batch.error is not None:
+                state = fail_tile(
+                    session,
+                    tile_id=batch.tile_id,
+                    lease_epoch=batch.lease_epoch,
+                    error=f"{batch.worker_id}: {batch.error}",
+                    max_attempts=self.settings.max_attempts,
+                )
+            elif batch.release and not batch.final and release_tile(
+                session, tile_id=batch.tile_id, lease_epoch=batch.lease_epoch
+            ):
+                self.counters.tiles_requeued.labels("released").inc()
+                state = "queued"
+        ack = Ack(
+            tile_id=batch.tile_id,
+            lease_epoch=batch.lease_epoch,
+            inserted=report.inserted,
+            duplicates=report.duplicates,
+            tile_state=str(state),
+        )
+        # Sent only now, after the batch is committed: the reply is the acknowledgement.
+        query.reply(str(query.key_expr), encode(ack))
+        return None
+
+    def _object(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:
+        request = decode_as(data, ObjectRequest)
+        if isinstance(request, ErrorReply):
+            return request
+        with self.sessions() as session:
+            found = mesh_by_hash(session, request.content_hash)
+        if found is None:
+            return error(ErrorCode.NOT_FOUND, f"no mesh with content hash {request.content_hash}")
+        mesh, fmt = found
+        message = ObjectData.of(request.content_hash, fmt, mesh)
+        query.reply(keys.object_key(request.content_hash), encode(message))
+        return None
+
+    # -- lost workers ----------------------------------------------------------------------
+
+    def _lost(self, key: str) -> None:
+        worker_id = keys.worker_of_alive_key(key)
+        if worker_id is None:
+            self.counters.errors.labels("liveliness", "bad_key").inc()
+            log.warning("liveliness token on unexpected key %s", key)
+            return
+        self.counters.workers_lost.inc()
+        with self.sessions() as session:
+            requeued, failed = requeue_lost(
+                session, worker_ids=[worker_id], max_attempts=self.settings.max_attempts
+            )
+        if requeued or failed:
+            self.counters.tiles_requeued.labels("worker_lost").inc(requeued)
+            log.info("worker %s lost: %d tiles queued again, %d failed", worker_id,
+                     requeued, failed)
+
+    def alive_workers(self, timeout_s: float = 2.0) -> set[str] | None:
+        """Worker ids with a liveliness token now; None when the question could not be asked."""
+        if self._session is None:
+            return None
+        found: set[str] = set()
+        for reply in self._session.liveliness().get(keys.ALIVE_ALL, timeout=timeout_s):
+            if reply.ok is not None:
+                worker_id = keys.worker_of_alive_key(str(reply.ok.key_expr))
+                if worker_id:
+                    found.add(worker_id)
+        return found
+
+    def _orphan_sweep(self) -> None:
+        # Workers that died while this coordinator was down left leases that no liveliness
+        # DELETE will ever announce. After a grace period, in which live workers reconnect
+        # and show their tokens, leases of owners without a token go back to the queue.
+        if self._stopping.wait(self.zs.orphan_grace_s):
+            return
+        try:
+            alive = self.alive_workers()
+            if alive is None:
+                return
+            with self.sessions() as session:
+                if not lease_owners(session) - alive:
+                    return
+                requeued, failed = requeue_lost(
+                    session, alive=alive, max_attempts=self.settings.max_attempts
+                )
+            self.counters.tiles_requeued.labels("orphaned").inc(requeued)
+            log.info("leases of workers gone since before start: %d tiles queued again, "
+                     "%d failed", requeued, failed)
+        except Exception:
+            self.counters.errors.labels("orphan_sweep", "handler").inc()
+            log.exception("orphan sweep failed; lease expiry remains the backstop")

@@ -1,0 +1,1 @@
+"""The coordinator ↔ worker protocol over zenoh: key expressions, messages, encode/decode."""

@@ -1,0 +1,162 @@
+"""The messages of the dispatch protocol: versioned, validated pydantic models.
+
+Every message carries the protocol version `v` and a `kind` tag; `decode` picks the model by
+the tag. A field added later gets a default so that version 1 peers keep understanding each
+other; a change in meaning bumps WIRE_VERSION, and a peer refuses versions it does not know
+with an error reply instead of guessing.
+"""
+
+from __future__ import annotations
+
+import base64
+from datetime import datetime
+from enum import StrEnum
+from typing import Annotated, Any, Literal
+
+from graspscape.shared.specs.objects import ObjectSpec
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import PoseResult
+from graspscape.shared.specs.sim import SimSettings
+from graspscape.shared.wire.keys import WORKER_ID_PATTERN
+from pydantic import BaseModel, ConfigDict, Field
+
+WIRE_VERSION = 1
+
+
+class _Message(BaseModel):
+    # Unknown fields are ignored, not refused: a newer peer may add optional fields.
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    v: Literal[1] = WIRE_VERSION
+
+
+class LeaseRequest(_Message):
+    """A worker process asks for up to `capacity` tiles."""
+
+    kind: Literal["lease_request"] = "lease_request"
+    worker_id: str = Field(pattern=WORKER_ID_PATTERN)
+    host: str = Field(default="", max_length=255)
+    capacity: int = Field(ge=1, le=64, description="tiles it can take now")
+    # Tiles the worker still works on. Any other tile leased to this worker id was lost on
+    # the way (a lease reply that never arrived) and goes back to the queue at once.
+    holding: list[int] = Field(default_factory=list, max_length=64)
+
+
+class ObjectRef(BaseModel):
+    """What a worker needs to build the object: a name, or a mesh fetched by content hash."""
+
+    model_config = ConfigDict(frozen=True)
+
+    object_id: int
+    name: str | None = None
+    content_hash: str | None = Field(default=None, pattern=r"^[0-9a-f]{64}$")
+    mesh_format: str | None = Field(default=None, pattern=r"^[a-z0-9]{1,8}$")
+    properties: dict[str, Any] = Field(default_factory=dict)
+
+    def spec(self, mesh_path: str | None = None) -> ObjectSpec:
+        """The ObjectSpec to simulate; mesh objects need the path of the cached mesh file."""
+        if self.content_hash is not None:
+            if mesh_path is None:
+                raise ValueError(f"object {self.object_id} needs its mesh fetched first")
+            return ObjectSpec(mesh_path=mesh_path, **self.properties)
+        return ObjectSpec(name=self.name, **self.properties)
+
+
+class TileLease(_Message):
+    """One leased tile with everything needed to evaluate it (one reply per tile)."""
+
+    kind: Literal["tile_lease"] = "tile_lease"
+    tile_id: int
+    exploration_id: int
+    level: int
+    index: int
+    lease_epoch: int
+    lease_expires_at: datetime
+    cells: list[tuple[float, float]]
+    r_levels: list[float]
+    attitudes: list[tuple[float, float, float]]
+    object: ObjectRef
+    gripper: str
+    settings: SimSettings
+
+    def poses(self) -> list[Pose]:
+        # The same expansion as the coordinator's, so pose keys agree on both sides.
+        from graspscape.services.coordinator.exploration.tiling import tile_poses
+
+        return tile_poses(self.cells, self.r_levels, self.attitudes)
+
+
+class ResultBatch(_Message):
+    """The results of one tile, reported under the lease epoch they were computed for.
+
+    `final`: every pose of the tile is in it. Otherwise the worker stopped early: `release`
+    hands the rest back to the queue (shutdown), `error` reports a failure (counts as an
+    attempt).
+    """
+
+    kind: Literal["result_batch"] = "result_batch"
+    worker_id: str = Field(pattern=WORKER_ID_PATTERN)
+    tile_id: int
+    lease_epoch: int
+    results: list[PoseResult]
+    final: bool = True
+    release: bool = False
+    error: str | None = Field(default=None, max_length=4000)
+
+
+class Ack(_Message):
+    """The coordinator committed a batch (or found it already committed)."""
+
+    kind: Literal["ack"] = "ack"
+    tile_id: int
+    lease_epoch: int
+    inserted: int
+    duplicates: int
+    tile_state: str
+
+
+class ObjectRequest(_Message):
+    kind: Literal["object_request"] = "object_request"
+    content_hash: str = Field(pattern=r"^[0-9a-f]{64}$")
+
+
+class ObjectData(_Message):
+    kind: Literal["object_data"] = "object_data"
+    content_hash: str = Field(pattern=r"^[0-9a-f]{64}$")
+    mesh_format: str = Field(pattern=r"^[a-z0-9]{1,8}$")
+    mesh_b64: str = Field(description="the mesh file, base64")
+
+    @classmethod
+    def of(cls, content_hash: str, mesh_format: str, mesh: bytes) -> ObjectData:
+        return cls(content_hash=content_hash, mesh_format=mesh_format,
+                   mesh_b64=base64.b64encode(mesh).decode())
+
+    def mesh(self) -> bytes:
+        return base64.b64decode(self.mesh_b64, validate=True)
+
+
+class ErrorCode(StrEnum):
+    MALFORMED = "malformed"  # not JSON, or fields fail validation
+    UNSUPPORTED_VERSION = "unsupported_version"
+    UNKNOWN_KIND = "unknown_kind"
+    UNEXPECTED_KIND = "unexpected_kind"  # a valid message sent to the wrong key
+    INVALID = "invalid"  # well formed but refused by the store (e.g. a pose key mismatch)
+    NOT_FOUND = "not_found"
+    UNAVAILABLE = "unavailable"  # the coordinator could not serve it now; retry
+    INTERNAL = "internal"
+
+    @property
+    def retryable(self) -> bool:
+        return self in (ErrorCode.UNAVAILABLE, ErrorCode.INTERNAL)
+
+
+class ErrorReply(_Message):
+    kind: Literal["error"] = "error"
+    code: ErrorCode
+    message: str = Field(max_length=4000)
+
+
+Message = Annotated[
+    LeaseRequest | TileLease | ResultBatch | Ack | ObjectRequest | ObjectData | ErrorReply,
+    Field(discriminator="kind"),
+]

@@ -1,0 +1,47 @@
+"""Settings of one worker (all its processes): where the coordinator is, how many processes,
+where objects are cached, and how patiently to retry."""
+
+from __future__ import annotations
+
+import os
+import re
+import secrets
+import socket
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+def default_procs() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def default_name() -> str:
+    host = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname())[:60] or "worker"
+    if not host[0].isalnum():
+        host = "w" + host
+    return f"{host}-{secrets.token_hex(3)}"
+
+
+class WorkerConfig(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    connect: list[str] = Field(default=["tcp/127.0.0.1:7447"], min_length=1)
+    procs: int = Field(default_factory=default_procs, ge=1, le=512)
+    name: str = Field(default_factory=default_name, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,80}$")
+    cache_dir: Path | None = Field(default=None, description="default: GRASPSCAPE_CACHE_DIR")
+    # No physics: answer every pose at once with a fixed result. Measures the coordinator's
+    # dispatch + ingest ceiling through the real protocol; never for real explorations.
+    instant: bool = False
+    tiles_per_request: int = Field(default=1, ge=1, le=64)
+    query_timeout_s: float = Field(default=10.0, gt=0)
+    backoff_min_s: float = Field(default=0.2, gt=0)
+    backoff_max_s: float = Field(default=5.0, gt=0)
+    # After SIGTERM, how long a process keeps trying to deliver its last batch before it
+    # exits anyway (its tile then comes back by liveliness or lease expiry).
+    shutdown_grace_s: float = Field(default=30.0, ge=0)
+    # A process that crashed (not one that was told to stop) is started again.
+    restart_crashed: bool = True

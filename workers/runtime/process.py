@@ -1,0 +1,221 @@
+"""One simulation process: pull a tile, evaluate its poses, report, repeat.
+
+Each process opens its own zenoh session after it started (a session never crosses a fork)
+and declares a liveliness token on its own key, so the coordinator re-queues its tile the
+moment it dies. SIGTERM or SIGINT: the pose being simulated is finished, the poses done are
+sent with the rest of the tile released, and the process exits.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+from graspscape.shared.specs.results import Outcome, PoseResult
+from graspscape.shared.wire import keys
+from graspscape.shared.wire.codec import decode_as, encode
+from graspscape.shared.wire.messages import (
+    Ack,
+    ErrorReply,
+    LeaseRequest,
+    ResultBatch,
+    TileLease,
+)
+from graspscape.shared.wire.session import zenoh_config
+from graspscape.workers.runtime.backoff import Backoff
+from graspscape.workers.runtime.config import WorkerConfig
+from graspscape.workers.runtime.objects import ObjectCache
+
+log = logging.getLogger("graspscape.worker")
+
+
+class Stopped(Exception):
+    """The process was told to stop while waiting for the coordinator."""
+
+
+class WorkerProcess:
+    def __init__(self, config: WorkerConfig, index: int) -> None:
+        self.config = config
+        self.worker_id = f"{config.name}-p{index}-{os.getpid()}"
+        self.stop = threading.Event()
+        self.stop_deadline: float | None = None
+        self.session: zenoh.Session | None = None
+        self.tiles_done = 0
+        self.poses_done = 0
+
+    # -- lifecycle -----------------------------------------------------------------------
+
+    def request_stop(self, *_: object) -> None:
+        if not self.stop.is_set():
+            self.stop_deadline = time.monotonic() + self.config.shutdown_grace_s
+            self.stop.set()
+
+    def run(self) -> None:
+        signal.signal(signal.SIGTERM, self.request_stop)
+        signal.signal(signal.SIGINT, self.request_stop)
+        try:
+            self.session = self._open()
+        except Stopped:
+            return
+        token = self.session.liveliness().declare_token(keys.alive_key(self.worker_id))
+        cache_dir = self.config.cache_dir or _default_cache_dir()
+        self.objects = ObjectCache(self.session, cache_dir, self.config.query_timeout_s)
+        self.cache_dir = cache_dir
+        log.info("%s connected to %s", self.worker_id, self.config.connect)
+        try:
+            self._loop()
+        finally:
+            token.undeclare()
+            self.session.close()
+            log.info("%s stopped after %d tiles, %d poses", self.worker_id, self.tiles_done,
+                     self.poses_done)
+
+    def _open(self) -> zenoh.Session:
+        backoff = Backoff(self.config.backoff_min_s, self.config.backoff_max_s)
+        while not self.stop.is_set():
+            try:
+                # Bounded connect timeout: the process stays responsive to SIGTERM while the
+                # coordinator is not up yet. Once open, zenoh reconnects by itself.
+                return zenoh.open(
+                    zenoh_config(
+                        mode="client",
+                        connect=self.config.connect,
+                        connect_timeout_ms=2000,
+                        exit_on_failure=True,
+                    )
+                )
+            except zenoh.ZError as exc:
+                log.info("%s: coordinator not reachable yet (%s)", self.worker_id, exc)
+                self.stop.wait(backoff.next())
+        raise Stopped
+
+    def _loop(self) -> None:
+        idle = Backoff(self.config.backoff_min_s, self.config.backoff_max_s)
+        while not self.stop.is_set():
+            tiles = self._lease()
+            if not tiles:
+                self.stop.wait(idle.next())  # no work, or no coordinator: ask again later
+                continue
+            idle.reset()
+            for tile in tiles:
+                if self.stop.is_set():
+                    # Not started: hand it back untouched.
+                    self._deliver(self._batch(tile, [], final=False, release=True))
+                    continue
+                self._work(tile)
+
+    # -- protocol ------------------------------------------------------------------------
+
+    def _lease(self) -> list[TileLease]:
+        request = LeaseRequest(
+            worker_id=self.worker_id,
+            host=self.config.name,
+            capacity=self.config.tiles_per_request,
+        )
+        tiles: list[TileLease] = []
+        try:
+            replies = self.session.get(
+                keys.LEASE_QUERY,
+                payload=encode(request),
+                consolidation=zenoh.ConsolidationMode.NONE,
+                timeout=self.config.query_timeout_s,
+            )
+            for reply in replies:
+                if reply.ok is not None:
+                    message = decode_as(reply.ok.payload.to_bytes(), TileLease)
+                else:
+                    message = decode_as(reply.err.payload.to_bytes(), ErrorReply)
+                if isinstance(message, TileLease):
+                    tiles.append(message)
+                else:
+                    # A tile whose reply cannot be read stays leased to this id; the next
+                    # request (holding nothing) hands it back.
+                    log.warning("%s: lease refused: %s: %s", self.worker_id, message.code,
+                                message.message)
+        except zenoh.ZError as exc:
+            log.warning("%s: lease query failed: %s", self.worker_id, exc)
+        return tiles
+
+    def _work(self, tile: TileLease) -> None:
+        poses = tile.poses()
+        results: list[PoseResult] = []
+        try:
+            obj = None if self.config.instant else self.objects.spec(tile.object)
+            for pose in poses:
+                if self.stop.is_set():
+                    break
+                results.append(self._evaluate(tile, obj, pose))
+        except Exception as exc:  # the tile cannot be evaluated here: report it, go on
+            log.exception("%s: tile %d failed", self.worker_id, tile.tile_id)
+            self._deliver(self._batch(tile, results, final=False,
+                                      error=f"{type(exc).__name__}: {exc}"))
+            return
+        final = len(results) == len(poses)
+        self._deliver(self._batch(tile, results, final=final, release=not final))
+        self.poses_done += len(results)
+        self.tiles_done += final
+
+    def _evaluate(self, tile: TileLease, obj, pose) -> PoseResult:
+        if self.config.instant:
+            return PoseResult(pose=pose, pose_key=pose.key(), outcome=Outcome.NO_CONTACT,
+                              viable=False, mu_s=0.0)
+        from graspscape.workers.sim.evaluate import evaluate_pose
+
+        return evaluate_pose(pose, obj=obj, gripper=tile.gripper, settings=tile.settings,
+                             cache_dir=self.cache_dir)
+
+    def _batch(self, tile: TileLease, results: list[PoseResult], *, final: bool,
+               release: bool = False, error: str | None = None) -> ResultBatch:
+        return ResultBatch(worker_id=self.worker_id, tile_id=tile.tile_id,
+                           lease_epoch=tile.lease_epoch, results=results, final=final,
+                           release=release, error=error)
+
+    def _deliver(self, batch: ResultBatch) -> Ack | None:
+        """Send a batch until the coordinator acknowledges it (the ack means committed)."""
+        payload = encode(batch)
+        key = keys.results_key(batch.tile_id, batch.lease_epoch)
+        backoff = Backoff(self.config.backoff_min_s, self.config.backoff_max_s)
+        while True:
+            try:
+                for reply in self.session.get(
+                    key,
+                    payload=payload,
+                    consolidation=zenoh.ConsolidationMode.NONE,
+                    timeout=self.config.query_timeout_s,
+                ):
+                    if reply.ok is not None:
+                        message = decode_as(reply.ok.payload.to_bytes(), Ack)
+                    else:
+                        message = decode_as(reply.err.payload.to_bytes(), ErrorReply)
+                    if isinstance(message, Ack):
+                        return message
+                    if not message.code.retryable:
+                        log.error("%s: batch of tile %d refused for good: %s: %s",
+                                  self.worker_id, batch.tile_id, message.code, message.message)
+                        return None
+                    log.warning("%s: batch of tile %d not stored yet: %s", self.worker_id,
+                                batch.tile_id, message.message)
+            except zenoh.ZError as exc:
+                log.warning("%s: sending tile %d failed: %s", self.worker_id, batch.tile_id, exc)
+            # No answer (coordinator down or restarting) or a retryable refusal.
+            if self.stop_deadline is not None and time.monotonic() > self.stop_deadline:
+                log.error("%s: gave up delivering tile %d at shutdown; it will be queued "
+                          "again by the coordinator", self.worker_id, batch.tile_id)
+                return None
+            time.sleep(backoff.next())
+
+
+def _default_cache_dir() -> Path:
+    return Path(os.environ.get("GRASPSCAPE_CACHE_DIR", Path.home() / ".cache" / "graspscape"))
+
+
+def process_main(config_json: str, index: int, log_level: str) -> None:
+    """Entry point of a spawned process (arguments are plain strings: spawn pickles them)."""
+    logging.basicConfig(level=log_level.upper(),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    WorkerProcess(WorkerConfig.model_validate_json(config_json), index).run()
