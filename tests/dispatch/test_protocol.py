@@ -1,0 +1,261 @@
+"""The protocol against a real Dispatcher (in this process) over a real zenoh session on
+loopback: duplicate batches, malformed messages, object fetch, lost lease replies. No physics:
+results are made up here, the store and the wire are real. Runs on SQLite and PostgreSQL."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import trimesh
+import zenoh
+from graspscape.services.coordinator.dispatch.service import Dispatcher
+from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.objects.service import create_uploaded
+from graspscape.services.coordinator.settings import Settings, ZenohSettings
+from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
+from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.results import Outcome, PoseResult
+from graspscape.shared.wire import keys
+from graspscape.shared.wire.codec import decode, encode
+from graspscape.shared.wire.messages import (
+    Ack,
+    ErrorCode,
+    ErrorReply,
+    LeaseRequest,
+    ResultBatch,
+    TileLease,
+)
+from graspscape.shared.wire.session import zenoh_config
+from graspscape.workers.runtime.objects import ObjectCache
+from prometheus_client import CollectorRegistry
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, sessionmaker
+
+from tests.dispatch.support import free_port, submit, wait_for
+
+
+@pytest.fixture
+def registry() -> CollectorRegistry:
+    return CollectorRegistry()
+
+
+@pytest.fixture
+def dispatcher(
+    any_url: str, any_sessions: sessionmaker[Session], registry: CollectorRegistry
+) -> Iterator[Dispatcher]:
+    port = free_port()
+    settings = Settings(
+        database_url=any_url,
+        zenoh=ZenohSettings(enabled=True, listen=[f"tcp/127.0.0.1:{port}"], orphan_grace_s=3600),
+    )
+    d = Dispatcher(settings, any_sessions, registry)
+    d.start()
+    assert d.ready
+    yield d
+    d.stop()
+
+
+@pytest.fixture
+def client(dispatcher: Dispatcher) -> Iterator[zenoh.Session]:
+    endpoint = dispatcher.zs.listen[0]
+    session = zenoh.open(zenoh_config(mode="client", connect=[endpoint]))
+    yield session
+    session.close()
+
+
+def ask(session: zenoh.Session, key: str, payload: bytes) -> list[tuple[str, object]]:
+    """(reply key or 'error', decoded message) for every reply of one query."""
+    out = []
+    for reply in session.get(key, payload=payload, consolidation=zenoh.ConsolidationMode.NONE,
+                             timeout=10):
+        if reply.ok is not None:
+            out.append((str(reply.ok.key_expr), decode(reply.ok.payload.to_bytes())))
+        else:
+            out.append(("error", decode(reply.err.payload.to_bytes())))
+    return out
+
+
+def lease(session: zenoh.Session, worker_id: str, capacity: int = 1) -> list[TileLease]:
+    replies = ask(session, keys.LEASE_QUERY,
+                  encode(LeaseRequest(worker_id=worker_id, capacity=capacity)))
+    tiles = [m for _, m in replies if isinstance(m, TileLease)]
+    assert len(tiles) == len(replies), replies
+    return tiles
+
+
+def made_up(tile: TileLease) -> list[PoseResult]:
+    return [PoseResult(pose=p, pose_key=p.key(), outcome=Outcome.HELD, viable=True, mu_s=0.5)
+            for p in tile.poses()]
+
+
+def counter(registry: CollectorRegistry, name: str, **labels: str) -> float:
+    return registry.get_sample_value(name, labels) or 0.0
+
+
+def test_one_reply_per_tile_on_distinct_keys(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    submit(any_sessions, tile_poses=3)
+    replies = ask(client, keys.LEASE_QUERY, encode(LeaseRequest(worker_id="w-1", capacity=4)))
+    assert len(replies) == 4
+    assert {k for k, _ in replies} == {keys.lease_reply_key(m.tile_id) for _, m in replies}
+    tile = replies[0][1]
+    assert tile.gripper == "robotiq_3f" and tile.object.name == "sphere"
+    assert len(tile.poses()) == 3
+
+
+def test_same_batch_twice_leaves_one_row_each(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    exploration_id = submit(any_sessions, tile_poses=3)
+    (tile,) = lease(client, "w-1")
+    batch = encode(ResultBatch(worker_id="w-1", tile_id=tile.tile_id,
+                               lease_epoch=tile.lease_epoch, results=made_up(tile)))
+    key = keys.results_key(tile.tile_id, tile.lease_epoch)
+    (first,) = ask(client, key, batch)
+    (second,) = ask(client, key, batch)
+    assert first == (key, Ack(tile_id=tile.tile_id, lease_epoch=tile.lease_epoch, inserted=3,
+                              duplicates=0, tile_state="done"))
+    assert isinstance(second[1], Ack) and second[1].inserted == 0
+    assert second[1].duplicates == 3
+    with any_sessions() as session:
+        rows = session.scalar(select(func.count()).select_from(PoseRow)
+                              .where(PoseRow.tile_id == tile.tile_id))
+        done = session.scalar(select(ExplorationRow.poses_done)
+                              .where(ExplorationRow.id == exploration_id))
+    assert rows == 3 and done == 3
+
+
+@pytest.mark.parametrize(
+    ("key", "payload", "code"),
+    [
+        (keys.LEASE_QUERY, b"\xff\x00 not json", ErrorCode.MALFORMED),
+        (keys.LEASE_QUERY, b"[1, 2]", ErrorCode.MALFORMED),
+        (keys.LEASE_QUERY, b'{"v": 9, "kind": "lease_request"}', ErrorCode.UNSUPPORTED_VERSION),
+        (keys.LEASE_QUERY, b'{"v": 1, "kind": "gimme"}', ErrorCode.UNKNOWN_KIND),
+        (keys.LEASE_QUERY, b'{"v": 1, "kind": "lease_request", "worker_id": "a/b*",'
+                           b' "capacity": 1}', ErrorCode.MALFORMED),
+        (keys.LEASE_QUERY, b'{"v": 1, "kind": "object_request", "content_hash": "' + b"0" * 64
+         + b'"}', ErrorCode.UNEXPECTED_KIND),
+        ("gs/results/1/1", b"", ErrorCode.MALFORMED),
+        ("gs/results/1/1", b'{"v": 1, "kind": "result_batch", "worker_id": "w", "tile_id": 1,'
+                           b' "lease_epoch": 1, "results": [{"pose": 3}]}', ErrorCode.MALFORMED),
+        ("gs/object/x", b'{"v": 1, "kind": "object_request", "content_hash": "zz"}',
+         ErrorCode.MALFORMED),
+        ("gs/object/" + "0" * 64, json.dumps({"v": 1, "kind": "object_request",
+                                             "content_hash": "0" * 64}).encode(),
+         ErrorCode.NOT_FOUND),
+    ],
+)
+def test_malformed_messages_get_error_replies(
+    client: zenoh.Session, any_sessions: sessionmaker[Session], registry: CollectorRegistry,
+    key: str, payload: bytes, code: ErrorCode,
+) -> None:
+    (reply,) = ask(client, key, payload)
+    assert reply[0] == "error"
+    assert isinstance(reply[1], ErrorReply) and reply[1].code == code, reply
+    kind = key.split("/")[1]  # lease, results, object
+    assert counter(registry, "graspscape_dispatch_errors_total", where=kind,
+                   code=code.value) == 1
+    # Nothing crashed: the dispatcher still serves a valid request.
+    submit(any_sessions, tile_poses=3)
+    assert len(lease(client, "w-ok")) == 1
+
+
+def test_result_with_wrong_pose_key_is_refused_and_nothing_stored(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    submit(any_sessions, tile_poses=3)
+    (tile,) = lease(client, "w-1")
+    results = made_up(tile)
+    results[1] = results[1].model_copy(update={"pose_key": "0/0/0/0/0/0"})
+    batch = ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                        results=results)
+    ((where, message),) = ask(client, keys.results_key(tile.tile_id, tile.lease_epoch),
+                              encode(batch))
+    assert where == "error" and message.code == ErrorCode.INVALID
+    assert not message.code.retryable
+    with any_sessions() as session:
+        assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
+
+
+def test_lost_lease_reply_is_released_by_the_next_request(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    submit(any_sessions, tile_poses=3)
+    (lost,) = lease(client, "w-1")  # pretend this reply never reached the worker
+    (again,) = lease(client, "w-1")  # holding nothing: the first goes back first
+    assert again.tile_id == lost.tile_id and again.lease_epoch == lost.lease_epoch + 1
+    with any_sessions() as session:
+        assert session.get(TileRow, lost.tile_id).attempts == 1  # not counted
+
+
+def test_partial_batch_with_release_requeues_uncounted(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    submit(any_sessions, tile_poses=3)
+    (tile,) = lease(client, "w-1")
+    batch = ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                        results=made_up(tile)[:1], final=False, release=True)
+    ((_, ack),) = ask(client, keys.results_key(tile.tile_id, tile.lease_epoch), encode(batch))
+    assert isinstance(ack, Ack) and ack.inserted == 1 and ack.tile_state == "queued"
+    with any_sessions() as session:
+        row = session.get(TileRow, tile.tile_id)
+        assert (row.state, row.attempts, row.lease_owner) == ("queued", 0, None)
+
+
+def test_error_report_counts_an_attempt(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    submit(any_sessions, tile_poses=3)
+    (tile,) = lease(client, "w-1")
+    batch = ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                        results=[], final=False, error="pybullet exploded")
+    ((_, ack),) = ask(client, keys.results_key(tile.tile_id, tile.lease_epoch), encode(batch))
+    assert isinstance(ack, Ack) and ack.tile_state == "queued"
+    with any_sessions() as session:
+        row = session.get(TileRow, tile.tile_id)
+        assert row.attempts == 1 and "pybullet exploded" in row.last_error
+
+
+def test_lost_worker_token_requeues_its_tiles_at_once(
+    client: zenoh.Session, dispatcher: Dispatcher, any_sessions: sessionmaker[Session]
+) -> None:
+    submit(any_sessions, tile_poses=3)
+    worker = zenoh.open(zenoh_config(mode="client", connect=dispatcher.zs.listen))
+    token = worker.liveliness().declare_token(keys.alive_key("w-gone"))
+    (tile,) = lease(worker, "w-gone")
+    worker.close()  # the token vanishes with the session, as with kill -9
+
+    def queued() -> bool:
+        with any_sessions() as session:
+            return session.get(TileRow, tile.tile_id).state == "queued"
+
+    wait_for(queued, 5, "the lost worker's tile to be queued again", every=0.05)
+    del token
+
+
+def test_mesh_is_fetched_once_and_checked(
+    client: zenoh.Session, any_sessions: sessionmaker[Session], tmp_path: Path
+) -> None:
+    data = trimesh.creation.box(extents=(0.05, 0.05, 0.1)).export(file_type="stl")
+    with any_sessions() as session:
+        row, _ = create_uploaded(session, filename="box.stl", data=data, properties={})
+        exploration = create_exploration(
+            session, spec=ExplorationSpec(object_id=row.id), tile_target_poses=100,
+            max_poses=100_000)
+    (tile,) = lease(client, "w-1")
+    assert tile.exploration_id == exploration.id
+    ref = tile.object
+    assert ref.content_hash == hashlib.sha256(data).hexdigest() and ref.name is None
+    # Two processes of one worker share the cache folder: one fetch between them.
+    first = ObjectCache(client, tmp_path, timeout_s=10)
+    second = ObjectCache(client, tmp_path, timeout_s=10)
+    spec = first.spec(ref)
+    assert Path(spec.mesh_path).read_bytes() == data
+    assert second.spec(ref).mesh_path == spec.mesh_path
+    assert (first.fetched, second.fetched) == (1, 0)
