@@ -128,13 +128,13 @@ class Worker:
 
 
 def submit(sessions: sessionmaker[Session], *, dtheta_deg: float = 90.0,
-           tile_poses: int = 3, object_name: str = "sphere") -> int:
+           tile_poses: int = 3, object_name: str = "sphere", r_max: float = 0.03) -> int:
     """A tiny exploration of the cheap built-in sphere; returns its id."""
     with sessions() as session:
         obj, _ = create_named(session, name=object_name, properties={}, shared_dir=None)
         spec = ExplorationSpec(
             object_id=obj.id,
-            grid=PoseGridSpec(dtheta=math.radians(dtheta_deg), r_min=0.01, r_max=0.03, dr=0.01),
+            grid=PoseGridSpec(dtheta=math.radians(dtheta_deg), r_min=0.01, r_max=r_max, dr=0.01),
             refinement=RefinementSpec(levels=0),
         )
         return create_exploration(session, spec=spec, tile_target_poses=tile_poses,
