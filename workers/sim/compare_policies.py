@@ -95,6 +95,7 @@ class PolicySummary(BaseModel):
     best_mu_g: float | None = None
     best_mu_f: float | None = None
     best_mu_m: float | None = None
+    outcomes: dict[str, int] = Field(description="poses per outcome (held, dropped, ...)")
     mean_eval_time_s: float
     min_closing_effort: float | None = Field(
         default=None, description="of the best-μs pose, N·m (with --min-effort)")
@@ -130,6 +131,8 @@ def _summary(policy: str, results: list[PoseResult], volumes: list[float]) -> Po
         best_mu_s=best.mu_s if best else None, best_mu_s_pose=best.pose_key if best else None,
         best_mu_g=_best(results, "mu_g"), best_mu_f=_best(results, "mu_f"),
         best_mu_m=_best(results, "mu_m"),
+        outcomes={o: sum(r.outcome.value == o for r in results)
+                  for o in sorted({r.outcome.value for r in results})},
         mean_eval_time_s=float(np.mean([r.eval_time_s for r in results])),
     )
 
