@@ -13,6 +13,7 @@ import sys
 SUBCOMMAND_MODULES = (
     "graspscape.workers.cli",
     "graspscape.services.coordinator.cli",
+    "graspscape.services.coordinator.maps.cli",
 )
 
 

@@ -17,7 +17,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from graspscape.services.coordinator import db
-from graspscape.services.coordinator.api import explorations, health, objects, workers
+from graspscape.services.coordinator.api import explorations, health, manifolds, objects, workers
 from graspscape.services.coordinator.errors import CoordinatorError, InvalidInput
 from graspscape.services.coordinator.metrics import Metrics
 from graspscape.services.coordinator.settings import Settings, get_settings
@@ -96,4 +96,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     for router in (objects.router, explorations.router, workers.router, health.router):
         app.include_router(router)
+    app.include_router(manifolds.router)
     return app

@@ -88,12 +88,49 @@ class RefinementSpec(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    levels: int = Field(default=2, ge=0, le=6, description="halvings of Δθ at boundaries")
+    # Default 0 (coarse pass only): refinement is asked for explicitly, so that a submitted
+    # spec's cost is bounded by what it states (docs/exploration.md).
+    levels: int = Field(
+        default=0,
+        ge=0,
+        le=6,
+        description="refinement depth: halvings of Δθ and Δr at borders (0: coarse pass only)",
+    )
     boundary_only: bool = Field(
         default=True, description="refine only cells whose neighbours differ in outcome"
     )
     max_poses: int = Field(
         default=200_000, ge=0, le=50_000_000, description="budget of refinement poses"
+    )
+    mu_step_max: float | None = Field(
+        default=None,
+        gt=0.0,
+        le=1.0,
+        description="slope criterion: also refine between neighbours of one manifold whose μs "
+        "differ by more than this (None: refine at borders only)",
+    )
+    local_search_rounds: int = Field(
+        default=3, ge=0, le=20, description="rounds of gradient ascent on μs per manifold"
+    )
+    local_search_starts: int = Field(
+        default=2, ge=1, le=20, description="local maxima followed per manifold"
+    )
+
+
+class ShortcutsSpec(BaseModel):
+    """The paper's shortcuts (section IV.B); each can be switched on alone."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    normal_reuse: bool = Field(
+        default=False,
+        description="along a surface normal, evaluate the r ends first and infer the levels "
+        "between when both ends give the same grasp (bisect otherwise)",
+    )
+    symmetry: bool = Field(
+        default=False,
+        description="detect mirror/rotation symmetries of the mesh and mirror results onto "
+        "the symmetric poses instead of evaluating them",
     )
 
 
@@ -115,6 +152,7 @@ class ExplorationSpec(BaseModel):
         "trajectory, physics, metric, start-pose rule",
     )
     refinement: RefinementSpec = Field(default_factory=RefinementSpec)
+    shortcuts: ShortcutsSpec = Field(default_factory=ShortcutsSpec)
     label: str | None = Field(
         default=None, max_length=200, pattern=r"^[^\x00]*$", description="free text for humans"
     )

@@ -5,14 +5,16 @@ from __future__ import annotations
 from datetime import datetime, timedelta
 
 from graspscape.services.coordinator.errors import Conflict, InvalidInput, NotFound
+from graspscape.services.coordinator.exploration.adaptive import plan_coarse
 from graspscape.services.coordinator.exploration.schemas import PoseFilter, Progress
-from graspscape.services.coordinator.exploration.tiling import coarse_tiles, count_poses
+from graspscape.services.coordinator.exploration.tiling import count_poses
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
     ExplorationStatus,
     ManifoldRow,
     ObjectRow,
+    PosePlanRow,
     PoseRow,
     TileRow,
     TileState,
@@ -39,7 +41,7 @@ def create_exploration(
             "raise grid.dtheta or grid.dr, or use fewer attitudes",
             loc=("body", "grid"),
         )
-    tiles = coarse_tiles(spec.grid, target_poses=tile_target_poses)
+    tiles = plan_coarse(spec, target_poses=tile_target_poses)
     now = utcnow()
     row = ExplorationRow(
         object_id=spec.object_id,
@@ -163,7 +165,7 @@ def delete_exploration(session: Session, *, exploration_id: int) -> None:
     get_exploration(session, exploration_id=exploration_id)
     # Children first, explicitly: the FK cascades would do it too, but this does not depend
     # on SQLite's foreign_keys pragma being on for whoever opened the connection.
-    for model in (PoseRow, ManifoldRow, TileRow):
+    for model in (PoseRow, ManifoldRow, PosePlanRow, TileRow):
         session.execute(delete(model).where(model.exploration_id == exploration_id))
     session.execute(delete(ExplorationRow).where(ExplorationRow.id == exploration_id))
     session.commit()

@@ -1,14 +1,11 @@
-"""The coarse-pass split of a pose grid into tiles of work.
+"""Tiles of work: the coarse pass of a grid, and any set of lattice poses, split into jobs.
 
-Deliberately simple and deterministic, so that the queue, leasing and progress are real before
-the spherical tiling and the adaptive refinement (a later issue) replace it; everything that
-depends on the split goes through `coarse_tiles` and `tile_poses`.
-
-The split: approach directions lie on rings of constant θ, θ_i = i·π/n with n = round(π/Δθ);
-ring i holds m_i = max(1, round(2π·sin θ_i / Δθ)) evenly spaced azimuths φ_j = j·2π/m_i (one
-point at each pole), so neighbouring points are about Δθ apart everywhere. Each ring is cut
-into contiguous φ sectors of at most `cells_per_tile` cells; a tile is its sector's cells ×
-every r level × every attitude.
+The approach directions come from the equal-area lattice (`lattice.py`): rings of constant θ
+whose azimuth count is ∝ sin θ, so every cell covers about Δθ² of the sphere and the poles
+hold one point each. A coarse tile is a contiguous φ sector of one ring × every r level ×
+every attitude. Refinement and local-search poses are arbitrary sets; `group_tiles` cuts them
+into tiles whose poses are exactly a product cells × r levels × attitudes (grouped by r level
+and attitude), which is what the tiles table and the workers expect.
 """
 
 from __future__ import annotations
@@ -17,6 +14,7 @@ import math
 from dataclasses import dataclass
 from itertools import pairwise
 
+from graspscape.services.coordinator.exploration.lattice import Lattice
 from graspscape.shared.specs.exploration import PoseGridSpec
 from graspscape.shared.specs.pose import Pose
 
@@ -37,13 +35,14 @@ class TilePlan:
 
 
 def rings(dtheta: float) -> list[list[Cell]]:
-    """The grid's approach directions, ring by ring from θ = 0 to θ = π."""
-    n = max(1, round(math.pi / dtheta))
-    out = []
-    for i in range(n + 1):
-        theta = i * math.pi / n
-        m = max(1, round(2 * math.pi * math.sin(theta) / dtheta))
-        out.append([(theta, j * 2 * math.pi / m) for j in range(m)])
+    """The coarse grid's approach directions, ring by ring from θ = 0 to θ = π."""
+    lattice = Lattice(PoseGridSpec(dtheta=dtheta))
+    out: list[list[Cell]] = []
+    for K, J in lattice.cells(0):
+        cell = (lattice.theta(K), 0.0 if lattice.is_pole(K) else J * 2 * math.pi / lattice.m(K))
+        if not out or out[-1][0][0] != cell[0]:
+            out.append([])
+        out[-1].append(cell)
     return out
 
 
@@ -71,6 +70,22 @@ def coarse_tiles(grid: PoseGridSpec, *, target_poses: int = 100) -> list[TilePla
 def count_poses(grid: PoseGridSpec) -> int:
     cells = sum(len(ring) for ring in rings(grid.dtheta))
     return cells * len(grid.r_levels()) * len(grid.attitudes.attitudes())
+
+
+def group_tiles(
+    poses: list[Pose], *, target_poses: int = 100, first_index: int = 0
+) -> list[TilePlan]:
+    """Any set of poses as tiles: same r and attitude share a tile, cells sorted, chunked."""
+    groups: dict[tuple[float, Attitude], list[Cell]] = {}
+    for pose in sorted(poses, key=lambda p: p.key()):
+        key = (pose.r, (pose.roll, pose.pitch, pose.yaw))
+        groups.setdefault(key, []).append((pose.theta, pose.phi))
+    tiles: list[TilePlan] = []
+    for (r, attitude), cells in sorted(groups.items()):
+        for start in range(0, len(cells), max(1, target_poses)):
+            chunk = cells[start : start + target_poses]
+            tiles.append(TilePlan(first_index + len(tiles), chunk, [r], [attitude]))
+    return tiles
 
 
 def tile_poses(

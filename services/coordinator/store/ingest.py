@@ -16,6 +16,7 @@ from datetime import datetime
 from typing import Any
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.exploration.adaptive import after_ingest
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.dialect import insert_for, is_postgres
 from graspscape.services.coordinator.store.models import (
@@ -207,6 +208,13 @@ def ingest_results(
         if moved:
             state = TileState.DONE
             finish_complete_explorations(session, [tile.exploration_id], now=now)
+    if inserted or moved:
+        # Adaptive exploration (exploration/adaptive.py): border refinement, shortcuts, local
+        # search and manifolds, decided from what is stored now. In this transaction, after the
+        # counter update whose row lock makes ingests of one exploration take turns.
+        after_ingest(
+            session, exploration_id=tile.exploration_id, results=results, tile_moved=moved, now=now
+        )
     session.commit()
     return IngestReport(
         inserted=inserted, duplicates=len(results) - inserted, tile_state=state, tile_moved=moved

@@ -122,6 +122,26 @@ class ManifoldRow(Base):
     size: Mapped[int] = mapped_column(Integer, default=0)
     best_pose_key: Mapped[str | None] = mapped_column(String(128))
     best_mu_s: Mapped[float | None] = mapped_column(Float)
+    # Description, volume, μs statistics, local maxima (services/coordinator/manifolds).
+    summary: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class PosePlanRow(Base):
+    """A pose the adaptive exploration decided to evaluate beyond the coarse pass.
+
+    The unique key makes "never evaluate the same pose twice" hold across concurrent ingests:
+    a pose is put in a tile only by the transaction whose insert here succeeded.
+    """
+
+    __tablename__ = "pose_plans"
+    __table_args__ = (UniqueConstraint("exploration_id", "pose_key"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    exploration_id: Mapped[int] = mapped_column(ForeignKey("explorations.id", ondelete="CASCADE"))
+    pose_key: Mapped[str] = mapped_column(String(128))
+    level: Mapped[int] = mapped_column(Integer)
+    reason: Mapped[str] = mapped_column(String(16))  # refine | normal | search
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

@@ -1,0 +1,192 @@
+"""Routes for the behavioral map: manifolds, best grasps, pictures and exports.
+
+Manifolds are brought up to date with the stored poses on read (`ensure_manifolds`), so these
+routes answer for running explorations too; `final` says whether the exploration completed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Path, Query, Response
+from graspscape.services.coordinator.api.deps import SessionDep
+from graspscape.services.coordinator.api.responses import error
+from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.exploration.schemas import PoseOut
+from graspscape.services.coordinator.manifolds import export
+from graspscape.services.coordinator.manifolds import service as manifolds
+from graspscape.services.coordinator.manifolds.summary import ManifoldSummary, table_rows_of
+from pydantic import BaseModel, Field
+
+router = APIRouter(tags=["manifolds"])
+
+Id = Annotated[int, Path(ge=1, le=2**31 - 1, description="exploration id")]
+_LABEL = r"^([A-Z]{1,3}|[0-9]{1,4})$"
+Label = Annotated[str, Path(pattern=_LABEL, description="manifold label: A, B, … or 0, 1, …")]
+_NOT_FOUND: dict[int | str, dict[str, Any]] = {404: error("no such exploration or manifold")}
+
+
+class ManifoldList(BaseModel):
+    exploration_id: int
+    final: bool = Field(description="true once the exploration completed")
+    manifolds: list[ManifoldSummary]
+
+
+class BestOut(BaseModel):
+    exploration_id: int
+    manifold: str | None
+    poses: list[PoseOut]
+
+
+def _label_number(label: str) -> int:
+    if label.isdigit():
+        return int(label)
+    n = 0
+    for ch in label:
+        n = n * 26 + (ord(ch) - ord("A") + 1)
+    return n - 1
+
+
+@router.get("/explorations/{exploration_id}/manifolds", response_model=ManifoldList,
+            responses=_NOT_FOUND, summary="The behavioral manifolds, largest first")
+def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
+    manifolds.ensure_manifolds(session, exploration_id)
+    return ManifoldList(
+        exploration_id=exploration_id,
+        final=manifolds.is_final(session, exploration_id),
+        manifolds=manifolds.stored_manifolds(session, exploration_id),
+    )
+
+
+@router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
+            responses=_NOT_FOUND, summary="One manifold by its label")
+def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
+    manifolds.ensure_manifolds(session, exploration_id)
+    number = _label_number(label)
+    for m in manifolds.stored_manifolds(session, exploration_id):
+        if m.label == number:
+            return m
+    raise NotFound(f"exploration {exploration_id} has no manifold {label}")
+
+
+@router.get(
+    "/explorations/{exploration_id}/best",
+    response_model=BestOut,
+    responses={**_NOT_FOUND, 422: {"description": "inconsistent constraints"}},
+    summary="The best grasps (highest μs), overall or in one manifold, under constraints",
+)
+def best(
+    exploration_id: Id,
+    session: SessionDep,
+    manifold: Annotated[str | None, Query(pattern=_LABEL)] = None,
+    cone_x: Annotated[float | None, Query(allow_inf_nan=False, ge=-1e6, le=1e6,
+                                          description="approach-cone axis (object frame)")] = None,
+    cone_y: Annotated[float | None, Query(allow_inf_nan=False, ge=-1e6, le=1e6)] = None,
+    cone_z: Annotated[float | None, Query(allow_inf_nan=False, ge=-1e6, le=1e6)] = None,
+    cone_half_angle_deg: Annotated[float | None, Query(ge=0.0, le=180.0)] = None,
+    max_effort_nm: Annotated[float | None, Query(ge=0.0, le=1e6, allow_inf_nan=False)] = None,
+    limit: Annotated[int, Query(ge=1, le=100)] = 1,
+) -> Any:
+    axis_given = [c is not None for c in (cone_x, cone_y, cone_z)]
+    axis = None
+    if any(axis_given):
+        if not all(axis_given) or cone_half_angle_deg is None:
+            raise InvalidInput("a cone needs cone_x, cone_y, cone_z and cone_half_angle_deg",
+                               loc=("query",))
+        axis = (float(cone_x), float(cone_y), float(cone_z))  # type: ignore[arg-type]
+        if math.hypot(*axis) < 1e-12:
+            raise InvalidInput("the cone axis must not be zero", loc=("query", "cone_x"))
+    elif cone_half_angle_deg is not None:
+        raise InvalidInput("cone_half_angle_deg needs cone_x, cone_y, cone_z", loc=("query",))
+    manifolds.ensure_manifolds(session, exploration_id)
+    rows = manifolds.best_poses(
+        session, exploration_id,
+        label=_label_number(manifold) if manifold is not None else None,
+        cone_axis=axis,
+        cone_half_angle=math.radians(cone_half_angle_deg) if cone_half_angle_deg is not None
+        else None,
+        max_effort_nm=max_effort_nm, limit=limit,
+    )
+    return BestOut(exploration_id=exploration_id, manifold=manifold,
+                   poses=[PoseOut.model_validate(r) for r in rows])
+
+
+def _picture(exploration_id: int, session: Any, fmt: Literal["png", "svg"], cut: str,
+             phi0_deg: float, attitude: int) -> Response:
+    from graspscape.services.coordinator.maps.render import render_map
+
+    manifolds.ensure_manifolds(session, exploration_id)
+    computed = manifolds.compute_map(session, exploration_id)
+    if attitude >= len(computed.lattice.attitudes):
+        raise InvalidInput(
+            f"attitude {attitude} out of range: the grid has {len(computed.lattice.attitudes)}",
+            loc=("query", "attitude"))
+    data = render_map(
+        computed.lattice, computed.samples, computed.label_of, computed.map, computed.mesh,
+        cut=cut, phi0=math.radians(phi0_deg), attitude=attitude, fmt=fmt,  # type: ignore[arg-type]
+        title=f"exploration {exploration_id}",
+    )
+    media = "image/png" if fmt == "png" else "image/svg+xml"
+    return Response(content=data, media_type=media)
+
+
+_PICTURE_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **_NOT_FOUND,
+    200: {"content": {"image/png": {}, "image/svg+xml": {}}, "description": "the map"},
+}
+Cut = Annotated[Literal["horizontal", "vertical"], Query(description="plane of the cut")]
+Phi0 = Annotated[float, Query(ge=-360.0, le=360.0, description="azimuth of a vertical cut, °")]
+AttitudeQ = Annotated[int, Query(ge=0, le=1000, description="attitude index of the cut")]
+
+
+@router.get("/explorations/{exploration_id}/map.png", response_class=Response,
+            responses=_PICTURE_RESPONSES, summary="The behavioral map (cut and 3D view), PNG")
+def map_png(exploration_id: Id, session: SessionDep, cut: Cut = "horizontal", phi0_deg: Phi0 = 0.0,
+            attitude: AttitudeQ = 0) -> Response:
+    return _picture(exploration_id, session, "png", cut, phi0_deg, attitude)
+
+
+@router.get("/explorations/{exploration_id}/map.svg", response_class=Response,
+            responses=_PICTURE_RESPONSES, summary="The behavioral map (cut and 3D view), SVG")
+def map_svg(exploration_id: Id, session: SessionDep, cut: Cut = "horizontal", phi0_deg: Phi0 = 0.0,
+            attitude: AttitudeQ = 0) -> Response:
+    return _picture(exploration_id, session, "svg", cut, phi0_deg, attitude)
+
+
+def _records(exploration_id: int, session: Any) -> list[dict[str, Any]]:
+    manifolds.ensure_manifolds(session, exploration_id)
+    return export.pose_records(session, exploration_id)
+
+
+@router.get("/explorations/{exploration_id}/export/poses.csv", response_class=Response,
+            responses={**_NOT_FOUND, 200: {"content": {"text/csv": {}}, "description": "CSV"}},
+            summary="Every pose with its outcome, μs and manifold, CSV")
+def export_csv(exploration_id: Id, session: SessionDep) -> Response:
+    data = export.poses_csv(_records(exploration_id, session))
+    return Response(content=data, media_type="text/csv")
+
+
+@router.get(
+    "/explorations/{exploration_id}/export/poses.parquet",
+    response_class=Response,
+    responses={**_NOT_FOUND,
+               200: {"content": {"application/vnd.apache.parquet": {}}, "description": "Parquet"}},
+    summary="Every pose with its outcome, μs and manifold, Parquet",
+)
+def export_parquet(exploration_id: Id, session: SessionDep) -> Response:
+    data = export.poses_parquet(_records(exploration_id, session))
+    return Response(content=data, media_type="application/vnd.apache.parquet")
+
+
+@router.get("/explorations/{exploration_id}/export/manifolds.json",
+            responses=_NOT_FOUND, summary="The manifold table (summaries and short rows), JSON")
+def export_manifolds(exploration_id: Id, session: SessionDep) -> Any:
+    manifolds.ensure_manifolds(session, exploration_id)
+    items = manifolds.stored_manifolds(session, exploration_id)
+    return {
+        "exploration_id": exploration_id,
+        "final": manifolds.is_final(session, exploration_id),
+        "table": table_rows_of(items),
+        "manifolds": [m.model_dump(mode="json") for m in items],
+    }

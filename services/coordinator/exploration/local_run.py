@@ -1,0 +1,117 @@
+"""Run an exploration in-process: lease, evaluate with pybullet, ingest — no network.
+
+For tests, benchmarks and the CLI on one machine. `workers` simulated workers lease one tile
+each per round; their reports are ingested in an order drawn from `seed`, and each tile's
+results may arrive in several partial batches, so that one spec can be driven through many
+interleavings (what different numbers of real workers would produce). Evaluations go through
+`evaluate`, by default pybullet in this process or in a process pool.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass
+
+from graspscape.services.coordinator.store.ingest import ingest_results
+from graspscape.services.coordinator.store.queue import lease_tiles
+from graspscape.shared.specs.objects import ObjectSpec
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import PoseResult
+from graspscape.shared.specs.sim import SimSettings
+from sqlalchemy.orm import Session, sessionmaker
+
+Evaluate = Callable[[Sequence[Pose]], list[PoseResult]]
+
+
+@dataclass
+class RunStats:
+    tiles: int = 0
+    evaluated: int = 0
+    wall_s: float = 0.0
+    eval_s: float = 0.0
+
+
+def _eval_one(args: tuple[Pose, ObjectSpec, str, SimSettings]) -> PoseResult:
+    from graspscape.workers.sim.evaluate import evaluate_pose
+
+    pose, obj, gripper, settings = args
+    return evaluate_pose(pose, obj=obj, gripper=gripper, settings=settings)
+
+
+def pybullet_evaluator(
+    obj: ObjectSpec,
+    gripper: str = "robotiq_3f",
+    settings: SimSettings | None = None,
+    *,
+    pool: Executor | None = None,
+    cache: dict[str, PoseResult] | None = None,
+) -> Evaluate:
+    """Evaluate poses with pybullet (in a pool if given). `cache` (pose key → result) lets
+    tests drive one spec through several interleavings without simulating a pose twice; an
+    evaluation is a pure function of pose, object, gripper and settings, so this changes
+    nothing but the time."""
+    settings = settings or SimSettings()
+
+    def run(poses: Sequence[Pose]) -> list[PoseResult]:
+        todo = [p for p in poses if cache is None or p.key() not in cache]
+        args = [(p, obj, gripper, settings) for p in todo]
+        if pool is not None:
+            done = list(pool.map(_eval_one, args, chunksize=4))
+        else:
+            done = [_eval_one(a) for a in args]
+        if cache is None:
+            return done
+        for r in done:
+            cache[r.pose_key] = r
+        return [cache[p.key()] for p in poses]
+
+    return run
+
+
+def run_local(
+    sessions: sessionmaker[Session],
+    evaluate: Evaluate,
+    *,
+    workers: int = 1,
+    seed: int = 0,
+    split: int = 1,
+    max_tiles: int = 100_000,
+) -> RunStats:
+    """Drive every queued tile to done. `split` > 1 sends each tile's results in that many
+    batches (the last one final); batches of all leased tiles are shuffled by `seed`."""
+    rng = random.Random(seed)
+    stats = RunStats()
+    started = time.perf_counter()
+    while stats.tiles < max_tiles:
+        leased = []
+        with sessions() as session:
+            for w in range(workers):
+                leased += [(f"local-{w}", t) for t in
+                           lease_tiles(session, worker_id=f"local-{w}", n=1, lease_seconds=3600)]
+        if not leased:
+            break
+        batches = []
+        for worker, tile in leased:
+            t0 = time.perf_counter()
+            results = evaluate(tile.poses())
+            stats.eval_s += time.perf_counter() - t0
+            stats.evaluated += len(results)
+            order = list(results)
+            rng.shuffle(order)
+            n = max(1, min(split, len(order)))
+            chunks = [order[i::n] for i in range(n)]
+            for i, chunk in enumerate(chunks):
+                batches.append((worker, tile, chunk, i == n - 1))
+        # Partial batches in any order, but a tile's final batch after its partial ones.
+        rng.shuffle(batches)
+        batches.sort(key=lambda b: b[3])
+        for worker, tile, chunk, final in batches:
+            with sessions() as session:
+                ingest_results(session, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                               worker_id=worker, results=chunk, final=final)
+        stats.tiles += len(leased)
+    stats.wall_s = time.perf_counter() - started
+    return stats

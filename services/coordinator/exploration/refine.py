@@ -1,0 +1,148 @@
+"""Adaptive decisions: which poses to evaluate next, from stored results only (pure functions).
+
+Every decision is a function of the results of two lattice neighbours (or of the two ends of
+a normal segment) and of nothing else: not of arrival order, not of which worker sent what.
+The set of poses an exploration evaluates is therefore the least set closed under these rules,
+the same for one worker or eight (see docs/exploration.md, "Determinism").
+
+- Border refinement: for neighbours p, q at level L that differ (viability, grasp type, or a
+  μs step above the slope criterion), the level-L+1 point between them is evaluated. The new
+  point has level-L+1 neighbours, among them p or q, so the border is bisected recursively
+  down to the refinement depth.
+- Normal reuse (shortcut 1): along one surface normal (fixed cell and attitude) the coarse r
+  levels are bisected: the two ends first; if both give the same grasp the levels between are
+  inferred from the nearer end (ties: the inner one), else the middle level is evaluated and
+  both halves are decided the same way.
+- Local search: at quiescence (no tile open), from the best local maxima of each manifold,
+  the finest-level neighbours not yet known are evaluated (one step of discrete gradient
+  ascent on μs per round).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.manifolds.behaviour import Sample, differs
+
+Lookup = Callable[[Point], Sample | None]
+
+
+@dataclass(frozen=True)
+class Proposal:
+    point: Point
+    level: int
+    reason: str  # "refine" | "normal" | "search"
+
+
+@dataclass(frozen=True)
+class Inference:
+    point: Point
+    source: Point  # whose result is reused
+    reason: str  # "normal"
+
+
+def lookup_points(lattice: Lattice, p: Point) -> set[Point]:
+    """Every point whose result a decision about p may read."""
+    out = set()
+    for level in range(lattice.birth(p), lattice.depth + 1):
+        for _, q in lattice.neighbours(p, level):
+            out.add(q)
+            mid = lattice.midpoint(p, q, level)
+            if mid is not None:
+                out.add(mid)
+    s = lattice.scale(0)
+    if p.I % s == 0 and lattice.birth(p) == 0:
+        out |= {Point(p.K, p.J, i * s, p.a) for i in range(lattice.n_r + 1)}
+    return out
+
+
+def border_proposals(
+    lattice: Lattice, p: Point, lookup: Lookup, mu_step_max: float | None
+) -> list[Proposal]:
+    a = lookup(p)
+    if a is None:
+        return []
+    out = []
+    for level in range(lattice.birth(p), lattice.depth):
+        for _, q in lattice.neighbours(p, level):
+            b = lookup(q)
+            if b is not None and differs(a, b, mu_step_max):
+                mid = lattice.midpoint(p, q, level)
+                if mid is not None:
+                    out.append(Proposal(mid, level + 1, "refine"))
+    return out
+
+
+def normal_segments(n_r: int) -> Iterator[tuple[int, int]]:
+    """The bisection tree of coarse r indices [0, n_r], parents before children."""
+    stack = [(0, n_r)]
+    while stack:
+        lo, hi = stack.pop(0)
+        if hi - lo > 1:
+            yield lo, hi
+            mid = (lo + hi) // 2
+            stack += [(lo, mid), (mid, hi)]
+
+
+def normal_decisions(
+    lattice: Lattice, p: Point, lookup: Lookup, mu_step_max: float | None
+) -> tuple[list[Proposal], list[Inference]]:
+    """Shortcut 1 for the normal through coarse point p (only evaluated ends decide)."""
+    s = lattice.scale(0)
+    if lattice.birth(p) != 0:
+        return [], []
+    i = p.I // s
+    proposals: list[Proposal] = []
+    inferred: list[Inference] = []
+    for lo, hi in normal_segments(lattice.n_r):
+        if i not in (lo, hi):
+            continue
+        plo, phi_ = Point(p.K, p.J, lo * s, p.a), Point(p.K, p.J, hi * s, p.a)
+        a, b = lookup(plo), lookup(phi_)
+        if a is None or b is None or a.source != "evaluated" or b.source != "evaluated":
+            continue
+        mid = (lo + hi) // 2
+        if differs(a, b, mu_step_max):
+            proposals.append(Proposal(Point(p.K, p.J, mid * s, p.a), 0, "normal"))
+        else:
+            for k in range(lo + 1, hi):
+                source = plo if k - lo <= hi - k else phi_
+                inferred.append(Inference(Point(p.K, p.J, k * s, p.a), source, "normal"))
+    return proposals, inferred
+
+
+def local_maxima(
+    lattice: Lattice, members: list[Point], lookup: Lookup, *, top: int
+) -> list[Point]:
+    """Viable members whose μs is at least that of every known neighbour in the manifold."""
+    member_set = set(members)
+    maxima = []
+    for p in members:
+        a = lookup(p)
+        if a is None:
+            continue
+        best = True
+        for level in range(lattice.birth(p), lattice.depth + 1):
+            for _, q in lattice.neighbours(p, level):
+                b = lookup(q)
+                if q in member_set and b is not None and b.mu_s > a.mu_s:
+                    best = False
+                    break
+            if not best:
+                break
+        if best:
+            maxima.append(p)
+    maxima.sort(key=lambda q: (-lookup(q).mu_s, q))  # type: ignore[union-attr]
+    return maxima[:top]
+
+
+def search_proposals(lattice: Lattice, maxima: list[Point], lookup: Lookup) -> list[Proposal]:
+    """The unknown finest-level neighbours of each local maximum."""
+    out = []
+    for p in maxima:
+        for _, q in lattice.neighbours(p, lattice.depth):
+            if lookup(q) is None:
+                out.append(Proposal(q, lattice.depth, "search"))
+    return out

@@ -1,0 +1,172 @@
+"""When two neighbouring poses show the same behaviour (pure functions).
+
+The stored signature names links ("A_1" … "C_3", "palm" for the 3-finger gripper). Grasp types
+are told apart by which digits touch (a digit is a finger — the links' common prefix — or the
+palm), and by where: between neighbouring poses the contact point of each digit may slide
+along with the approach, by at most the arc the approach moved at the contact's distance from
+the centre of mass (plus the change of r and a slack), but not jump to another part of the
+object. Contact positions are in the object frame, so this is a continuity test rather than a
+global comparison: a sphere approached from any side is one behaviour, while the mug's handle
+(contacts jumping several cm off the body) is another.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+_LINK = re.compile(r"^([A-Za-z]+)_\d+$")
+SLIDE_FACTOR = 1.5
+SLACK_M = 0.005
+# Same grasp type between neighbours: mean joint angle within 0.25 rad, each digit's contact
+# within 2 cm on the hand.
+JOINT_TOLERANCE_RAD = 0.25
+HAND_TOLERANCE_M = 0.02
+
+
+def digit(link: str) -> str:
+    match = _LINK.match(link)
+    return match.group(1) if match else link
+
+
+@dataclass(frozen=True)
+class Sample:
+    """What the map needs of one stored pose."""
+
+    key: str
+    theta: float
+    phi: float
+    r: float
+    roll: float
+    pitch: float
+    yaw: float
+    viable: bool
+    outcome: str
+    mu_s: float
+    effort: float = 0.0
+    digits: frozenset[str] = frozenset()
+    # digit → force-weighted contact centroid in the object frame
+    contacts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    # digit → the same centroid in the gripper base frame after closing (object rotations in
+    # the hand, e.g. a rolling sphere, do not move it)
+    hand_contacts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    joints: dict[str, float] = field(default_factory=dict)
+    grasp: dict[str, Any] | None = None
+    source: str = "evaluated"  # or "shortcut:normal", "shortcut:symmetry"
+
+    @staticmethod
+    def from_row(row: Any) -> Sample:
+        digits: dict[str, list[tuple[tuple[float, float, float], float]]] = {}
+        sig = row.signature or {}
+        for c in sig.get("contacts", ()):
+            digits.setdefault(digit(c["link"]), []).append(
+                (tuple(c["position_object"]), max(float(c["normal_force_n"]), 0.0))
+            )
+        for link in sig.get("links_in_contact", ()):
+            digits.setdefault(digit(link), [])
+        contacts = {}
+        for d, items in digits.items():
+            if not items:
+                continue
+            total = sum(w for _, w in items)
+            ws = [w / total if total > 0 else 1 / len(items) for _, w in items]
+            contacts[d] = tuple(
+                sum(w * pos[i] for (pos, _), w in zip(items, ws, strict=True)) for i in range(3)
+            )
+        hand: dict[str, tuple[float, float, float]] = {}
+        grasp = row.grasp or {}
+        if grasp.get("base_position") is not None and grasp.get("base_orientation") is not None:
+            rot = Rotation.from_quat(grasp["base_orientation"]).as_matrix()
+            base = np.asarray(grasp["base_position"], dtype=float)
+            for d, pos in contacts.items():
+                hand[d] = tuple(float(v) for v in rot.T @ (np.asarray(pos) - base))
+        worker = row.worker_id or ""
+        return Sample(
+            key=row.pose_key,
+            theta=row.theta,
+            phi=row.phi,
+            r=row.r,
+            roll=row.roll,
+            pitch=row.pitch,
+            yaw=row.yaw,
+            viable=bool(row.viable),
+            outcome=row.outcome,
+            mu_s=float(row.mu_s),
+            effort=float(row.effort_max_nm or 0.0),
+            digits=frozenset(digits),
+            contacts=contacts,  # type: ignore[arg-type]
+            hand_contacts=hand,
+            joints={k: float(v) for k, v in (sig.get("joint_angles") or {}).items()},
+            grasp=row.grasp,
+            source=worker if worker.startswith("shortcut:") else "evaluated",
+        )
+
+    def direction(self) -> tuple[float, float, float]:
+        st = math.sin(self.theta)
+        return (st * math.cos(self.phi), st * math.sin(self.phi), math.cos(self.theta))
+
+
+def start_frame(s: Sample) -> np.ndarray:
+    """The gripper's start attitude as placement builds it (palm normal toward the object,
+    two-finger side up, then roll, pitch, yaw), taking the approach direction for the surface
+    normal (the coordinator has no mesh at hand here; exact for a sphere, close elsewhere)."""
+    z = -np.array(s.direction())
+    up = np.array([0.0, 0.0, 1.0])
+    x = -(up - up.dot(z) * z)
+    if np.linalg.norm(x) < 1e-6:
+        ex = np.array([1.0, 0.0, 0.0])
+        x = ex - ex.dot(z) * z
+    x /= np.linalg.norm(x)
+    base = np.column_stack([x, np.cross(z, x), z])
+    return base @ Rotation.from_euler("ZYX", [s.roll, s.pitch, s.yaw]).as_matrix()
+
+
+def approach_angle(a: Sample, b: Sample) -> float:
+    """Rotation angle between the two start attitudes of the gripper, rad. Near the poles the
+    reference attitude turns fast with φ, so this is larger than the angle between directions."""
+    rel = start_frame(a).T @ start_frame(b)
+    return float(math.acos(max(-1.0, min(1.0, (np.trace(rel) - 1.0) / 2.0))))
+
+
+def same_behaviour(a: Sample, b: Sample) -> bool:
+    """Both viable, the same digits touching, and the hand closed alike (mean joint angle
+    difference within JOINT_TOLERANCE_RAD). Where joint angles are missing, contacts must
+    have slid with the approach rather than jumped (`slid`)."""
+    if not (a.viable and b.viable) or a.digits != b.digits:
+        return False
+    shared = set(a.joints) & set(b.joints)
+    if shared:
+        diff = sum(abs(a.joints[j] - b.joints[j]) for j in shared) / len(shared)
+        return diff <= JOINT_TOLERANCE_RAD
+    return slid(a, b)
+
+
+def slid(a: Sample, b: Sample) -> bool:
+    """Every digit's object-frame contact moved at most the arc the gripper turned through at
+    the contact's distance from the centre of mass (× SLIDE_FACTOR, + Δr, + SLACK_M)."""
+    angle = approach_angle(a, b)
+    for d in a.digits:
+        pa, pb = a.contacts.get(d), b.contacts.get(d)
+        if pa is None or pb is None:
+            continue
+        radius = max(math.hypot(*pa), math.hypot(*pb))
+        allowed = SLIDE_FACTOR * (radius * angle + abs(a.r - b.r)) + SLACK_M
+        if math.dist(pa, pb) > allowed:
+            return False
+    return True
+
+
+def differs(a: Sample, b: Sample, mu_step_max: float | None = None) -> bool:
+    """A border (viability or grasp type) or, optionally, a steep μs slope lies between them."""
+    if a.viable != b.viable:
+        return True
+    if not a.viable:
+        return False  # the non-viable area is one class, whatever the failure
+    if not same_behaviour(a, b):
+        return True
+    return mu_step_max is not None and abs(a.mu_s - b.mu_s) > mu_step_max

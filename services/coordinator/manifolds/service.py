@@ -1,0 +1,270 @@
+"""Manifolds in the store: recompute from the stored poses, save, and query.
+
+`refresh_manifolds` replaces the exploration's manifold rows and the poses' manifold column
+with what `summary.build_map` computes from every stored pose; it runs as results arrive
+(throttled: `maybe_refresh`) and once more, final, when the exploration completes. The
+object mesh is needed only for volumes (surface radius along each approach direction); it is
+prepared once per process and object.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from graspscape.services.coordinator.errors import NotFound
+from graspscape.services.coordinator.exploration.adaptive import lattice_of, load_samples, spec_of
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.manifolds.behaviour import Sample
+from graspscape.services.coordinator.manifolds.grouping import (
+    FALLBACK_RADIUS,
+    FineLabels,
+    surface_radii,
+)
+from graspscape.services.coordinator.manifolds.summary import (
+    ManifoldMap,
+    ManifoldSummary,
+    build_map,
+)
+from graspscape.services.coordinator.store.models import (
+    ExplorationRow,
+    ExplorationStatus,
+    ManifoldRow,
+    ObjectRow,
+    PoseRow,
+)
+from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.objects import ObjectSpec
+from sqlalchemy import delete, select, update
+from sqlalchemy.orm import Session
+
+log = logging.getLogger("graspscape.coordinator.manifolds")
+
+REFRESH_EVERY_TILES = 10  # incremental refresh cadence beyond the first small explorations
+REFRESH_ALWAYS_BELOW = 5000  # stored poses below which every finished tile refreshes
+FALLBACK_RADIUS_M = FALLBACK_RADIUS
+_KEY_CHUNK = 500
+
+
+def object_spec(row: ObjectRow, cache_dir: Path) -> ObjectSpec:
+    props = dict(row.properties or {})
+    if row.mesh is not None and row.content_hash:
+        path = cache_dir / "coordinator-meshes" / f"{row.content_hash}.{row.mesh_format}"
+        if not path.is_file():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(row.mesh)
+        return ObjectSpec(mesh_path=str(path), **props)
+    return ObjectSpec(name=row.name, **props)
+
+
+@functools.lru_cache(maxsize=16)
+def _mesh_for(spec_json: str) -> Any:
+    from graspscape.workers.sim.evaluate import default_cache_dir
+    from graspscape.workers.sim.objects import prepare_object
+
+    spec = ObjectSpec.model_validate_json(spec_json)
+    return prepare_object(spec, default_cache_dir() / "objects").mesh
+
+
+def object_mesh(session: Session, object_id: int) -> Any | None:
+    """The object's mesh in its centre-of-mass frame, or None where it cannot be prepared."""
+    from graspscape.workers.sim.evaluate import default_cache_dir
+
+    row = session.get(ObjectRow, object_id)
+    if row is None:
+        return None
+    try:
+        return _mesh_for(object_spec(row, default_cache_dir()).model_dump_json())
+    except Exception:  # volumes fall back to a fixed radius; the map itself does not need it
+        log.exception("object %s: mesh unavailable, volumes use a %.2f m radius",
+                      object_id, FALLBACK_RADIUS_M)
+        return None
+
+
+def radius_function(mesh: Any | None) -> Any:
+    def radius(directions: np.ndarray) -> np.ndarray:
+        return surface_radii(mesh, directions, FALLBACK_RADIUS_M)
+
+    return radius
+
+
+@dataclass(frozen=True)
+class ComputedMap:
+    spec: ExplorationSpec
+    lattice: Lattice
+    samples: dict[Point, Sample]
+    map: ManifoldMap
+    fine: FineLabels
+    label_of: dict[Point, int]
+    mesh: Any | None
+
+
+def compute_map(
+    session: Session, exploration_id: int, *, samples: dict[Point, Sample] | None = None
+) -> ComputedMap:
+    """The manifold map of the stored poses (not stored by this function)."""
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    spec = spec_of(row.spec, exploration_id)
+    lattice = lattice_of(spec)
+    samples = samples if samples is not None else load_samples(session, exploration_id, lattice)
+    mesh = object_mesh(session, row.object_id)
+    mmap, fine, label_of = build_map(
+        lattice, samples, radius_function(mesh),
+        maxima_per_manifold=spec.refinement.local_search_starts,
+    )
+    return ComputedMap(spec, lattice, samples, mmap, fine, label_of, mesh)
+
+
+def refresh_manifolds(
+    session: Session,
+    exploration_id: int,
+    spec: ExplorationSpec | None = None,
+    lattice: Lattice | None = None,
+    *,
+    samples: dict[Point, Sample] | None = None,
+    final: bool = False,
+) -> ManifoldMap:
+    """Recompute and store the manifolds (rows and pose assignment); caller commits."""
+    computed = compute_map(session, exploration_id, samples=samples)
+    samples, mmap, label_of = computed.samples, computed.map, computed.label_of
+    exploration = session.get(ExplorationRow, exploration_id)
+    poses_done = exploration.poses_done if exploration is not None else 0
+    session.execute(
+        update(PoseRow).where(PoseRow.exploration_id == exploration_id)
+        .values(manifold_id=None).execution_options(synchronize_session=False)
+    )
+    session.execute(delete(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id))
+    keys_of: dict[int, list[str]] = {}
+    for p, label in label_of.items():
+        keys_of.setdefault(label, []).append(samples[p].key)
+    for m in mmap.manifolds:
+        best_sig = session.scalar(
+            select(PoseRow.signature).where(PoseRow.exploration_id == exploration_id,
+                                            PoseRow.pose_key == m.best.key)
+        )
+        row = ManifoldRow(
+            exploration_id=exploration_id, label=m.label, signature=best_sig,
+            size=m.pose_count, best_pose_key=m.best.key, best_mu_s=m.best.mu_s,
+            summary={**m.model_dump(mode="json"), "final": final, "poses_done": poses_done},
+        )
+        session.add(row)
+        session.flush()
+        keys = sorted(keys_of.get(m.label, []))
+        for i in range(0, len(keys), _KEY_CHUNK):
+            session.execute(
+                update(PoseRow)
+                .where(PoseRow.exploration_id == exploration_id,
+                       PoseRow.pose_key.in_(keys[i : i + _KEY_CHUNK]))
+                .values(manifold_id=row.id)
+                .execution_options(synchronize_session=False)
+            )
+    return mmap
+
+
+def ensure_manifolds(session: Session, exploration_id: int) -> None:
+    """Bring the stored manifolds up to date with the stored poses (commits if it had to)."""
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    first = session.scalars(
+        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id).limit(1)
+    ).first()
+    done = row.status in (ExplorationStatus.DONE, ExplorationStatus.CANCELLED)
+    if first is not None and first.summary is not None:
+        if first.summary.get("poses_done") == row.poses_done and (
+            first.summary.get("final") or not done
+        ):
+            return
+    elif first is None and row.poses_done == 0:
+        return
+    refresh_manifolds(session, exploration_id, final=done)
+    session.commit()
+
+
+def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
+                  lattice: Lattice) -> None:
+    """Incremental refresh as tiles finish (every tile while small, then every 10th)."""
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        return
+    from graspscape.services.coordinator.store.models import TileRow, TileState
+    from sqlalchemy import func
+
+    done = session.scalar(
+        select(func.count()).select_from(TileRow).where(
+            TileRow.exploration_id == exploration_id, TileRow.state == TileState.DONE)
+    ) or 0
+    if row.poses_done < REFRESH_ALWAYS_BELOW or done % REFRESH_EVERY_TILES == 0:
+        refresh_manifolds(session, exploration_id, spec, lattice, final=False)
+
+
+# --- queries ---------------------------------------------------------------------------------
+def stored_manifolds(session: Session, exploration_id: int) -> list[ManifoldSummary]:
+    if session.get(ExplorationRow, exploration_id) is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    rows = session.scalars(
+        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id)
+        .order_by(ManifoldRow.label)
+    ).all()
+    return [ManifoldSummary.model_validate(r.summary) for r in rows if r.summary]
+
+
+def is_final(session: Session, exploration_id: int) -> bool:
+    row = session.scalars(
+        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id).limit(1)
+    ).first()
+    return bool(row and row.summary and row.summary.get("final"))
+
+
+def approach_vector(theta: float, phi: float) -> tuple[float, float, float]:
+    """Direction the gripper moves in to approach (from its start toward the object)."""
+    st = math.sin(theta)
+    return (-st * math.cos(phi), -st * math.sin(phi), -math.cos(theta))
+
+
+def best_poses(
+    session: Session,
+    exploration_id: int,
+    *,
+    label: int | None = None,
+    cone_axis: tuple[float, float, float] | None = None,
+    cone_half_angle: float | None = None,
+    max_effort_nm: float | None = None,
+    limit: int = 1,
+) -> list[PoseRow]:
+    """Viable poses by μs (desc, then key), optionally inside one manifold, an approach cone,
+    and below a joint effort."""
+    if session.get(ExplorationRow, exploration_id) is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    query = select(PoseRow).where(PoseRow.exploration_id == exploration_id, PoseRow.viable)
+    if label is not None:
+        mid = session.scalar(select(ManifoldRow.id).where(
+            ManifoldRow.exploration_id == exploration_id, ManifoldRow.label == label))
+        if mid is None:
+            raise NotFound(f"exploration {exploration_id} has no manifold {label}")
+        query = query.where(PoseRow.manifold_id == mid)
+    if max_effort_nm is not None:
+        query = query.where(PoseRow.effort_max_nm <= max_effort_nm)
+    query = query.order_by(PoseRow.mu_s.desc(), PoseRow.pose_key)
+    out: list[PoseRow] = []
+    axis = None
+    if cone_axis is not None:
+        norm = math.sqrt(sum(c * c for c in cone_axis)) or 1.0
+        axis = tuple(c / norm for c in cone_axis)
+    cos_max = math.cos(cone_half_angle) if cone_half_angle is not None else -1.0
+    for row in session.execute(query.execution_options(yield_per=500)).scalars():
+        if axis is not None:
+            v = approach_vector(row.theta, row.phi)
+            if sum(a * b for a, b in zip(axis, v, strict=True)) < cos_max - 1e-12:
+                continue
+        out.append(row)
+        if len(out) >= limit:
+            break
+    return out
