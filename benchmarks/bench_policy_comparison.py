@@ -2,7 +2,8 @@
 
 Runs `compare_object` for each built-in over the "small" pose grid (6 θ × 6 φ × 2 gap cells of
 2 cm, roll 0: 72 poses an object and policy, chosen so the whole run takes a few minutes on
-one core) and bisects the minimum closing effort of each policy's best-μs pose. Reports the
+one core) and bisects the minimum closing effort of each policy's best-μs pose; then both
+policies on 90 poses facing the mug's handle (`mug_handle_sweep`). Reports the
 viable-set volumes v_c and v_s (cm³), containment of the G_c-viable poses in the G_s-viable
 ones, and the best μs, μg, μf, μm of each policy. The viable set is not yet split into
 behavioral manifolds (a later issue), so v is the volume of the whole viable set.
@@ -22,6 +23,7 @@ from graspscape.workers.sim.compare_policies import (
     GRIDS,
     compare_object,
     markdown_table,
+    mug_handle_sweep,
 )
 
 try:
@@ -57,6 +59,10 @@ def main() -> None:
     if gains:
         figures["mean_volume_gain"] = round(sum(gains) / len(gains), 4)
     figures["objects_with_full_containment"] = sum(r.contained_share == 1.0 for r in rows)
+    handle = mug_handle_sweep() if "mug" in args.objects else None
+    if handle is not None:
+        for key, value in handle.model_dump().items():
+            figures[f"mug_handle_sweep.{key}"] = value
     figures["wall_s"] = round(time.perf_counter() - started, 1)
     table = markdown_table(rows)
     print(table)

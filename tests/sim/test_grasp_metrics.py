@@ -118,11 +118,12 @@ def test_simulated_sphere_grasp_carries_its_static_metrics(sphere_evaluator):
     assert result.min_closing_effort is None  # only the comparison command bisects
 
 
-def test_pose_without_grasp_has_no_static_metrics(sphere_evaluator):
-    result = sphere_evaluator.evaluate(Pose(theta=math.pi / 2, phi=0.0, r=0.02, pitch=math.pi))
-    assert not result.viable
-    if result.signature is None:
-        assert result.mu_g is None and result.mu_f is None and result.mu_m is None
+def test_pose_without_grasp_has_no_static_metrics(mug_evaluator):
+    # Above the rim on the side away from the handle, the open fingers would sit inside the
+    # mug from every start gap up to the back-off limit: no grasp, so no contacts to score.
+    result = mug_evaluator.evaluate(Pose(theta=0.5, phi=math.pi, r=0.02))
+    assert result.signature is None
+    assert result.mu_g is None and result.mu_f is None and result.mu_m is None
 
 
 def test_minimum_effort_holds_and_a_clearly_lower_one_drops(make_evaluator):

@@ -11,6 +11,7 @@ from graspscape.shared.specs.haptic import HapticPolicySettings
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import Outcome
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.compare_policies import on_mug_handle
 from graspscape.workers.sim.policies import list_policies
 from graspscape.workers.sim.policies.haptic import (
     ProximitySensors,
@@ -51,10 +52,10 @@ def test_same_pose_same_result_even_with_sensor_noise(make_evaluator):
                         haptic=HapticPolicySettings(noise_std_m=0.002, noise_seed=7))
     evaluator = make_evaluator("sphere", settings=noisy)
     pose = Pose(theta=1.1, phi=0.7, r=0.03, roll=0.4)
+    timing = {"eval_time_s", "phases"}
     first, second = evaluator.evaluate(pose), evaluator.evaluate(pose)
-    for result in (first, second):
-        result.__dict__.pop("eval_time_s"), result.__dict__.pop("phases")
-    assert first == second
+    assert first.viable
+    assert first.model_dump(exclude=timing) == second.model_dump(exclude=timing)
 
 
 def _hand_state(evaluator) -> np.ndarray:
@@ -107,29 +108,22 @@ def test_unreachable_alignment_makes_the_pose_non_viable(make_evaluator):
     assert not result.viable and result.mu_s == 0.0
 
 
-# Poses facing the built-in mug's handle (+x), tilted a little below it; G_c closes on the
-# body here or loses the mug, and the haptic policy is expected to use the handle.
+# Poses facing the built-in mug's handle (+x), a little below it and turned by ±45°. Around the
+# handle neither policy dominates (docs/metrics.md): these are poses of that neighbourhood from
+# which G_c closes on the body and loses the mug, or finds nothing, while G_s may take the
+# handle. The test asks for at least one.
 HANDLE_POSES = [
     Pose(theta=1.85, phi=-0.3, r=0.01, roll=math.pi / 4),
+    Pose(theta=1.7, phi=0.3, r=0.02, roll=-math.pi / 4),
     Pose(theta=1.85, phi=0.0, r=0.02, roll=math.pi / 4),
-    Pose(theta=1.85, phi=0.0, r=0.01, roll=math.pi / 4),
-    Pose(theta=1.85, phi=0.3, r=0.02, roll=math.pi / 4),
+    Pose(theta=2.0, phi=-0.15, r=0.01, roll=3 * math.pi / 4),
 ]
-
-
-def _handle_closure(result) -> bool:
-    """Held along the trajectory with a contact on the handle (past the 4 cm body radius on
-    +x, within the handle tube's width in y)."""
-    if not result.viable:
-        return False
-    return any(c.position_object[0] > 0.045 and abs(c.position_object[1]) < 0.012
-               for c in result.signature.contacts)
 
 
 def test_haptic_policy_finds_handle_grasps_the_baseline_misses(mug_evaluator, haptic_mug):
     found = []
     for pose in HANDLE_POSES:
         baseline, haptic = mug_evaluator.evaluate(pose), haptic_mug.evaluate(pose)
-        if _handle_closure(haptic) and not baseline.viable:
+        if on_mug_handle(haptic) and not baseline.viable:
             found.append(pose)
     assert found, "G_s held the mug by its handle from none of the poses where G_c fails"

@@ -186,6 +186,55 @@ def compare_object(name: str, grid_name: str = "small", *, gripper: GripperSpec 
     )
 
 
+class HandleSweep(BaseModel):
+    """Both policies on poses facing the built-in mug's handle (+x)."""
+
+    poses: int
+    held_c: int
+    held_s: int
+    handle_c: int = Field(description="G_c held with a contact on the handle")
+    handle_s: int = Field(description="G_s held with a contact on the handle")
+    handle_s_where_c_not_viable: int
+    held_s_where_c_dropped: int
+
+
+def on_mug_handle(result: PoseResult) -> bool:
+    """Held, with a contact on the handle: past the body's 4 cm radius on +x, within the
+    handle tube's width in y."""
+    return result.viable and any(
+        c.position_object[0] > 0.045 and abs(c.position_object[1]) < 0.012
+        for c in result.signature.contacts)
+
+
+def mug_handle_poses() -> list[Pose]:
+    rolls = (math.pi / 4, -math.pi / 4, 3 * math.pi / 4)
+    return [Pose(theta=t, phi=f, r=r, roll=a) for t in (1.7, 1.85, 2.0)
+            for f in (-0.3, -0.15, 0.0, 0.15, 0.3) for a in rolls for r in (0.01, 0.02)]
+
+
+def mug_handle_sweep(cache_dir: Path | None = None) -> HandleSweep:
+    from graspscape.workers.sim.evaluate import Evaluator, default_cache_dir
+    from graspscape.workers.sim.objects import prepare_object
+
+    cache = cache_dir or default_cache_dir()
+    prepared = prepare_object(ObjectSpec(name="mug"), cache / "objects")
+    poses = mug_handle_poses()
+    out: dict[str, list[PoseResult]] = {}
+    for policy in POLICIES:
+        with Evaluator(prepared, load_gripper("robotiq_3f"), SimSettings(policy_name=policy),
+                       work_dir=cache) as evaluator:
+            out[policy] = [evaluator.evaluate(pose) for pose in poses]
+    pairs = list(zip(out["baseline"], out["haptic"], strict=True))
+    return HandleSweep(
+        poses=len(poses), held_c=sum(c.viable for c, _ in pairs),
+        held_s=sum(s.viable for _, s in pairs),
+        handle_c=sum(on_mug_handle(c) for c, _ in pairs),
+        handle_s=sum(on_mug_handle(s) for _, s in pairs),
+        handle_s_where_c_not_viable=sum(on_mug_handle(s) and not c.viable for c, s in pairs),
+        held_s_where_c_dropped=sum(s.viable and c.outcome.value == "dropped" for c, s in pairs),
+    )
+
+
 def _fmt(value: float | None, digits: int = 2) -> str:
     return "–" if value is None else f"{value:.{digits}f}"
 
