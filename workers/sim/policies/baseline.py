@@ -18,6 +18,7 @@ import time
 import numpy as np
 from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.policies.closing import close_fingers
 
 BLOCKED_ADVANCE_M = 0.0005
 APPROACH_TIME_CAP_S = 1.5
@@ -64,21 +65,6 @@ class BaselinePolicy:
         if not scene.in_contact():
             return Outcome.NO_CONTACT
 
-        t1 = time.perf_counter()
-        held_pos, held_rot = hand.frame_pose()
-        scene.drive_to(held_pos, held_rot)
-        hand.begin_closing(settings.closing_speed)
-        cap = max(1, round(settings.closing_cap_s / dt))
-        for step in range(1, cap + 1):
-            scene.step()
-            phases.closing_steps += 1
-            if step % settings.check_every_steps == 0 and hand.update_closing(
-                    settings.stall_tolerance):
-                break
-        phases.closing_s = time.perf_counter() - t1
-        if not scene.in_contact():
-            return Outcome.NO_GRASP
-        return None
-
+        return close_fingers(scene, settings, phases)
 
 POLICY = BaselinePolicy

@@ -40,6 +40,7 @@ import pybullet as p
 from graspscape.shared.specs.haptic import HapticPolicySettings
 from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.policies.closing import close_fingers
 from scipy.spatial.transform import Rotation
 
 
@@ -242,24 +243,8 @@ class HapticPolicy:
             return Outcome.NO_CONTACT
 
         # --- hold: the base stays, the closing torque τ_c closes the fingers (as G_c) --------
-        t1 = time.perf_counter()
-        closing = sim.policy
-        held_pos, held_rot = hand.frame_pose()
-        scene.drive_to(held_pos, held_rot)
         # Phalanges not yet closing are held where step 2 left them, stiff as in G_c.
         command_joints(angles(), hold)
-        hand.begin_closing(closing.closing_speed)
-        cap = max(1, round(closing.closing_cap_s / scene.dt))
-        for step in range(1, cap + 1):
-            scene.step()
-            phases.closing_steps += 1
-            if step % closing.check_every_steps == 0 and hand.update_closing(
-                    closing.stall_tolerance):
-                break
-        phases.closing_s = time.perf_counter() - t1
-        if not scene.in_contact():
-            return Outcome.NO_GRASP
-        return None
-
+        return close_fingers(scene, sim.policy, phases)
 
 POLICY = HapticPolicy
