@@ -190,7 +190,9 @@ def _enqueue(session: Session, exploration_id: int, props: list[Proposal], latti
         .where(ExplorationRow.id == exploration_id)
         .values(
             tiles_total=ExplorationRow.tiles_total + added,
-            poses_total=ExplorationRow.poses_total + len(props),
+            # Normal-reuse levels are coarse poses, already counted at submission.
+            poses_total=ExplorationRow.poses_total
+            + sum(1 for prop in props if prop.reason != "normal"),
             status=ExplorationStatus.RUNNING,
             finished_at=None,
             updated_at=now,

@@ -89,13 +89,21 @@ class Lattice:
     def theta(self, K: int) -> float:
         return K * math.pi / self.n_rings
 
+    @cached_property
+    def _m_birth(self) -> list[int]:
+        """Azimuths of every ring at its birth level (1 at the poles)."""
+        out = []
+        for K in range(self.n_rings + 1):
+            b = self.ring_birth(K)
+            m_b = max(1, round(TWO_PI * math.sin(self.theta(K)) / self.dtheta(b)))
+            out.append(1 if self.is_pole(K) else m_b)
+        return out
+
     def m_at(self, K: int, level: int) -> int:
         """Azimuths on ring K at `level` (the ring must exist there)."""
         if self.is_pole(K):
             return 1
-        b = self.ring_birth(K)
-        m_b = max(1, round(TWO_PI * math.sin(self.theta(K)) / self.dtheta(b)))
-        return m_b << (level - b)
+        return self._m_birth[K] << (level - self.ring_birth(K))
 
     def m(self, K: int) -> int:
         return self.m_at(K, self.depth)

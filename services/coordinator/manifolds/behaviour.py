@@ -23,10 +23,8 @@ from scipy.spatial.transform import Rotation
 _LINK = re.compile(r"^([A-Za-z]+)_\d+$")
 SLIDE_FACTOR = 1.5
 SLACK_M = 0.005
-# Same grasp type between neighbours: mean joint angle within 0.25 rad, each digit's contact
-# within 2 cm on the hand.
+# Same grasp type between neighbours: every digit's mean joint angle within 0.25 rad.
 JOINT_TOLERANCE_RAD = 0.25
-HAND_TOLERANCE_M = 0.02
 
 
 def digit(link: str) -> str:
@@ -52,9 +50,6 @@ class Sample:
     digits: frozenset[str] = frozenset()
     # digit → force-weighted contact centroid in the object frame
     contacts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
-    # digit → the same centroid in the gripper base frame after closing (object rotations in
-    # the hand, e.g. a rolling sphere, do not move it)
-    hand_contacts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     joints: dict[str, float] = field(default_factory=dict)
     grasp: dict[str, Any] | None = None
     source: str = "evaluated"  # or "shortcut:normal", "shortcut:symmetry"
@@ -78,13 +73,6 @@ class Sample:
             contacts[d] = tuple(
                 sum(w * pos[i] for (pos, _), w in zip(items, ws, strict=True)) for i in range(3)
             )
-        hand: dict[str, tuple[float, float, float]] = {}
-        grasp = row.grasp or {}
-        if grasp.get("base_position") is not None and grasp.get("base_orientation") is not None:
-            rot = Rotation.from_quat(grasp["base_orientation"]).as_matrix()
-            base = np.asarray(grasp["base_position"], dtype=float)
-            for d, pos in contacts.items():
-                hand[d] = tuple(float(v) for v in rot.T @ (np.asarray(pos) - base))
         worker = row.worker_id or ""
         return Sample(
             key=row.pose_key,
@@ -100,7 +88,6 @@ class Sample:
             effort=float(row.effort_max_nm or 0.0),
             digits=frozenset(digits),
             contacts=contacts,  # type: ignore[arg-type]
-            hand_contacts=hand,
             joints={k: float(v) for k, v in (sig.get("joint_angles") or {}).items()},
             grasp=row.grasp,
             source=worker if worker.startswith("shortcut:") else "evaluated",
@@ -133,17 +120,25 @@ def approach_angle(a: Sample, b: Sample) -> float:
     return float(math.acos(max(-1.0, min(1.0, (np.trace(rel) - 1.0) / 2.0))))
 
 
-def same_behaviour(a: Sample, b: Sample) -> bool:
-    """Both viable, the same digits touching, and the hand closed alike (mean joint angle
-    difference within JOINT_TOLERANCE_RAD). Where joint angles are missing, contacts must
-    have slid with the approach rather than jumped (`slid`)."""
+def same_behaviour(a: Sample, b: Sample, tolerance: float | None = None) -> bool:
+    """Both viable, the same digits touching, and the hand closed alike (each digit's mean
+    joint angle difference within JOINT_TOLERANCE_RAD). Where joint angles are missing,
+    contacts must have slid with the approach rather than jumped (`slid`)."""
     if not (a.viable and b.viable) or a.digits != b.digits:
         return False
     shared = set(a.joints) & set(b.joints)
     if shared:
-        diff = sum(abs(a.joints[j] - b.joints[j]) for j in shared) / len(shared)
-        return diff <= JOINT_TOLERANCE_RAD
+        return joint_difference(a, b, shared) <= (tolerance or JOINT_TOLERANCE_RAD)
     return slid(a, b)
+
+
+def joint_difference(a: Sample, b: Sample, joints: set[str]) -> float:
+    """The largest per-digit mean |Δ joint angle|: one finger closing differently counts in
+    full instead of being averaged away by the fingers that did not change."""
+    per_digit: dict[str, list[float]] = {}
+    for j in joints:
+        per_digit.setdefault(j.split("_")[0], []).append(abs(a.joints[j] - b.joints[j]))
+    return max(sum(v) / len(v) for v in per_digit.values())
 
 
 def slid(a: Sample, b: Sample) -> bool:

@@ -29,6 +29,7 @@ NON_VIABLE = -1
 FALLBACK_RADIUS = 0.05  # m, surface radius where no mesh is at hand
 MIN_POSES = 3  # components smaller than this (or than MIN_SHARE of the viable poses) are specks
 MIN_SHARE = 0.02
+SPECK_TOLERANCE_RAD = 0.35  # 1.4 × the joint tolerance of `same_behaviour`
 
 
 def label_name(label: int) -> str:
@@ -90,9 +91,9 @@ def _merge_specks(
     lattice: Lattice, samples: Mapping[Point, Sample], comps: list[list[Point]]
 ) -> list[list[Point]]:
     """Fold specks (fewer than max(MIN_POSES, MIN_SHARE of the viable poses) members) into
-    the larger neighbouring component with the same digits that they touch most: single
-    poses whose contacts scattered (an object rolling in the hand) are noise, not a
-    behaviour. A speck with no such neighbour stays on its own."""
+    the larger neighbouring component they nearly match most often (same digits, joints
+    within SPECK_TOLERANCE_RAD): a lone pose whose fingers closed a little differently is
+    noise, not a behaviour. A speck with no such neighbour stays on its own."""
     n_viable = sum(len(c) for c in comps)
     small = max(MIN_POSES, math.ceil(MIN_SHARE * n_viable))
     owner = {p: i for i, c in enumerate(comps) for p in c}
@@ -105,8 +106,8 @@ def _merge_specks(
             for level in range(lattice.birth(p), lattice.depth + 1):
                 for _, q in lattice.neighbours(p, level):
                     j = owner.get(q)
-                    if j is not None and j != i and len(comps[j]) >= small and (
-                        samples[q].digits == samples[p].digits
+                    if j is not None and j != i and len(comps[j]) >= small and same_behaviour(
+                        samples[p], samples[q], SPECK_TOLERANCE_RAD
                     ):
                         votes[j] += 1
         if votes:

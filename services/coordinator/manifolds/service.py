@@ -45,8 +45,7 @@ from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
-REFRESH_EVERY_TILES = 10  # incremental refresh cadence beyond the first small explorations
-REFRESH_ALWAYS_BELOW = 5000  # stored poses below which every finished tile refreshes
+REFRESH_EVERY_TILES = 10  # incremental refresh: every 10th finished tile (and at the end)
 FALLBACK_RADIUS_M = FALLBACK_RADIUS
 _KEY_CHUNK = 500
 
@@ -190,7 +189,7 @@ def ensure_manifolds(session: Session, exploration_id: int) -> None:
 
 def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
                   lattice: Lattice) -> None:
-    """Incremental refresh as tiles finish (every tile while small, then every 10th)."""
+    """Incremental refresh as tiles finish (every REFRESH_EVERY_TILES-th)."""
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         return
@@ -201,7 +200,7 @@ def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
         select(func.count()).select_from(TileRow).where(
             TileRow.exploration_id == exploration_id, TileRow.state == TileState.DONE)
     ) or 0
-    if row.poses_done < REFRESH_ALWAYS_BELOW or done % REFRESH_EVERY_TILES == 0:
+    if done % REFRESH_EVERY_TILES == 0:
         refresh_manifolds(session, exploration_id, spec, lattice, final=False)
 
 

@@ -1,0 +1,80 @@
+"""The equal-area nested lattice: areas, nesting, neighbours, midpoints, pose round trips."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.exploration.tiling import coarse_tiles, group_tiles, tile_poses
+from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
+
+GRIDS = [
+    PoseGridSpec(dtheta=math.radians(30), r_max=0.02, dr=0.01),
+    PoseGridSpec(dtheta=math.radians(10), r_max=0.01, dr=0.01, attitudes=AttitudeSpec(rolls=2)),
+    PoseGridSpec(dtheta=0.7, r_min=0.01, r_max=0.01),
+]
+
+
+@pytest.mark.parametrize("grid", GRIDS)
+@pytest.mark.parametrize("depth", [0, 2])
+def test_cells_have_about_equal_area_and_cover_the_sphere(grid: PoseGridSpec, depth: int) -> None:
+    lattice = Lattice(grid, depth)
+    for level in range(depth + 1):
+        areas = [lattice.cell_area(K, level) for K, _ in lattice.cells(level)]
+        assert math.isclose(sum(areas), 4 * math.pi, rel_tol=1e-9)
+        step2 = lattice.dtheta(level) ** 2
+        # No pile-up at the poles: the polar caps are π/4·Δθ², every other cell within 30 %.
+        assert min(areas) >= 0.77 * step2
+        assert max(areas) <= 1.3 * step2
+        ring_cells = [a for (K, _), a in zip(lattice.cells(level), areas, strict=True)
+                      if not lattice.is_pole(K)]
+        assert max(ring_cells) / min(ring_cells) < 1.45
+
+
+def test_levels_are_nested_and_keys_stable() -> None:
+    lattice = Lattice(GRIDS[0], 3)
+    for level in range(3):
+        here = {(K, J) for K, J in lattice.cells(level)}
+        finer = {(K, J) for K, J in lattice.cells(level + 1)}
+        assert here <= finer
+        assert len(finer) > 3 * len(here)
+    for p in lattice.coarse_points():
+        assert lattice.birth(p) == 0
+        assert lattice.point(lattice.pose(p)) == p
+        # the same grid point through a shallower lattice has the same pose key
+        shallow = Lattice(GRIDS[0], 0)
+        q = Point(p.K >> 3, p.J >> 3 if not lattice.is_pole(p.K) else 0, p.I >> 3, p.a)
+        assert shallow.pose(q).key() == lattice.pose(p).key()
+
+
+def test_coarse_tiles_are_the_level_zero_points() -> None:
+    grid = GRIDS[1]
+    lattice = Lattice(grid, 2)
+    keys = {p.key() for t in coarse_tiles(grid, target_poses=50)
+            for p in tile_poses(t.cells, t.r_levels, t.attitudes)}
+    assert keys == {lattice.pose(p).key() for p in lattice.coarse_points()}
+
+
+def test_neighbours_are_symmetric_and_midpoints_new() -> None:
+    lattice = Lattice(GRIDS[0], 2)
+    for level in range(2):
+        points = [Point(K, J, 0, 0) for K, J in lattice.cells(level)]
+        for p in points:
+            for _, q in lattice.neighbours(p, level):
+                assert lattice.exists(q, level)
+                assert p in [x for _, x in lattice.neighbours(q, level)], (p, q)
+                mid = lattice.midpoint(p, q, level)
+                assert mid is not None and lattice.birth(mid) == level + 1
+                # halfway: about half the angle from either end
+                assert lattice.angle(p, mid) <= 0.8 * lattice.angle(p, q) + 1e-6
+
+
+def test_group_tiles_cover_exactly_the_given_poses() -> None:
+    lattice = Lattice(GRIDS[1], 1)
+    poses = [lattice.pose(p) for p in lattice.coarse_points()[::3]]
+    tiles = group_tiles(poses, target_poses=7, first_index=5)
+    got = [p.key() for t in tiles for p in tile_poses(t.cells, t.r_levels, t.attitudes)]
+    assert sorted(got) == sorted(p.key() for p in poses)
+    assert [t.index for t in tiles] == list(range(5, 5 + len(tiles)))
+    assert max(t.n_poses for t in tiles) <= 7

@@ -1,0 +1,173 @@
+"""Objects with a known answer, explored for real (pybullet) through the real store and API.
+
+Every pose is simulated once per session (a shared cache keyed by pose key; an evaluation is
+a pure function of the pose, object, gripper and settings), so the second database backend
+and the second interleaving replay the same physics through the store.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import xml.etree.ElementTree as ET
+from concurrent.futures import ProcessPoolExecutor
+
+import pyarrow.parquet as pq
+import pytest
+from graspscape.services.coordinator.exploration.local_run import pybullet_evaluator, run_local
+from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.manifolds.behaviour import same_behaviour
+from graspscape.services.coordinator.manifolds.service import compute_map
+from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.objects import ObjectSpec
+from PIL import Image
+
+CACHES: dict[str, dict] = {}
+HANDLE_X_M = 0.055  # the mug's body has a 4.5 cm radius; its handle reaches x ≈ 7 cm
+
+
+@pytest.fixture(scope="module")
+def pool():
+    with ProcessPoolExecutor(2) as executor:
+        yield executor
+
+
+def _evaluator(name: str, pool):
+    return pybullet_evaluator(ObjectSpec(name=name), pool=pool, cache=CACHES.setdefault(name, {}))
+
+
+def _explore(sessions, object_id: int, name: str, pool, *, dtheta: float, levels: int,
+             workers: int = 2, seed: int = 0):
+    spec = ExplorationSpec(
+        object_id=object_id,
+        grid={"dtheta": math.radians(dtheta), "r_min": 0.01, "r_max": 0.01},
+        refinement={"levels": levels, "local_search_rounds": 1},
+    )
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=16, max_poses=10**6).id
+    run_local(sessions, _evaluator(name, pool), workers=workers, seed=seed)
+    with sessions() as s:
+        return eid, compute_map(s, eid)
+
+
+def _at(computed, theta_deg: float, phi_deg: float):
+    for p, sample in computed.samples.items():
+        if (abs(math.degrees(sample.theta) - theta_deg) < 0.5
+                and abs(math.remainder(math.radians(phi_deg) - sample.phi, 2 * math.pi)) < 0.01):
+            return p, sample
+    raise AssertionError(f"no pose at θ={theta_deg}, φ={phi_deg}")
+
+
+def test_sphere_is_one_manifold_with_near_constant_mu(sessions, named_object, pool) -> None:
+    _, c = _explore(sessions, named_object("sphere"), "sphere", pool, dtheta=45, levels=1)
+    viable = [p for p, s in c.samples.items() if s.viable]
+    assert len(viable) >= 0.9 * len(c.samples)
+    biggest = c.map.manifolds[0]
+    assert biggest.pose_count >= 0.95 * len(viable)
+    assert len(c.map.manifolds) == 1
+    assert biggest.mu_s_std < 0.08
+    assert biggest.local_maxima and biggest.best.mu_s >= biggest.mu_s_mean
+
+
+def test_sphere_map_is_the_same_for_one_or_two_workers(sessions, named_object, pool) -> None:
+    runs = [_explore(sessions, named_object("sphere"), "sphere", pool, dtheta=45, levels=1,
+                     workers=w, seed=w) for w in (1, 2)]
+    (_, a), (_, b) = runs
+    assert {s.key for s in a.samples.values()} == {s.key for s in b.samples.values()}
+    assert a.map.model_dump() == b.map.model_dump()
+
+
+def test_cube_shows_face_edge_and_corner_approaches(sessions, named_object, pool) -> None:
+    _, c = _explore(sessions, named_object("cube"), "cube", pool, dtheta=45, levels=0)
+    faces = [_at(c, t, f) for t, f in ((0, 0), (90, 0), (90, 90), (90, 180), (90, 270), (180, 0))]
+    edges = [_at(c, 90, f) for f in (45, 135, 225, 315)]
+    corners = [_at(c, t, f) for t in (45, 135) for f in (60, 120, 240, 300)]
+    # Face approaches: the palm on the face and the fingers closed alike, all six faces.
+    assert all(s.viable and "palm" in s.digits for _, s in faces)
+    assert all(same_behaviour(faces[0][1], s) for _, s in faces[1:])
+    # Edge approaches close differently: never the face grasp.
+    assert all(not same_behaviour(faces[1][1], s) for _, s in edges)
+    # Toward a corner the hand pinches with two digits.
+    pinches = [s for _, s in corners if s.viable and len(s.digits) == 2]
+    assert len(pinches) >= 4
+    # Pinches are other manifolds than the face grasps. (Face and edge grasps may chain into
+    # one manifold: for this hand the thumb's joints change gradually between them.)
+    label = c.label_of
+    face_labels = {label[p] for p, _ in faces}
+    assert not face_labels & {label.get(p) for p, s in corners if s in pinches}
+    described = {m.label: m for m in c.map.manifolds}
+    assert all("palm" in described[lab].digits for lab in face_labels)
+
+
+def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
+    client, sessions, pool
+) -> None:
+    response = client.post("/objects", data={"name": "mug"})
+    assert response.status_code == 201, response.text
+    spec = {
+        "object_id": response.json()["id"],
+        "grid": {"dtheta": math.radians(30), "r_min": 0.01, "r_max": 0.01},
+        "refinement": {"levels": 1, "local_search_rounds": 1},
+    }
+    created = client.post("/explorations", json=spec)
+    assert created.status_code == 201, created.text
+    eid = created.json()["id"]
+    run_local(sessions, _evaluator("mug", pool), workers=2)
+    assert client.get(f"/explorations/{eid}").json()["status"] == "done"
+
+    listed = client.get(f"/explorations/{eid}/manifolds").json()
+    assert listed["final"] is True
+    table = listed["manifolds"]
+    assert [m["name"] for m in table][:3] == ["A", "B", "C"]
+    assert [m["volume_cm3"] for m in table] == sorted((m["volume_cm3"] for m in table),
+                                                       reverse=True)
+    with sessions() as s:
+        c = compute_map(s, eid)
+    head_on, _ = _at(c, 90, 0)  # straight at the handle
+    handle = c.label_of[head_on]
+    body = 0
+
+    def on_handle(p):
+        return any(pos[0] > HANDLE_X_M for pos in c.samples[p].contacts.values())
+
+    members = {lab: [p for p, x in c.label_of.items() if x == lab] for lab in (handle, body)}
+    assert handle != body
+    assert sum(map(on_handle, members[handle])) >= 0.5 * len(members[handle])
+    assert sum(map(on_handle, members[body])) <= 0.1 * len(members[body])
+
+    one = client.get(f"/explorations/{eid}/manifolds/{table[handle]['name']}")
+    assert one.status_code == 200 and one.json()["label"] == handle
+    assert client.get(f"/explorations/{eid}/manifolds/ZZ").status_code == 404
+
+    best = client.get(f"/explorations/{eid}/best", params={"limit": 3}).json()["poses"]
+    assert len(best) == 3 and best[0]["mu_s"] == max(m["mu_s_max"] for m in table)
+    # From above only (approach direction within 60° of −z), and a low effort cap.
+    cone = client.get(f"/explorations/{eid}/best", params={
+        "cone_x": 0, "cone_y": 0, "cone_z": -1, "cone_half_angle_deg": 60, "limit": 50}).json()
+    assert cone["poses"] and all(p["theta"] <= math.radians(60) + 1e-9 for p in cone["poses"])
+    cap = sorted(p["effort_max_nm"] for p in best)[0]
+    capped = client.get(f"/explorations/{eid}/best",
+                        params={"max_effort_nm": cap, "limit": 100}).json()["poses"]
+    assert capped and all(p["effort_max_nm"] <= cap for p in capped)
+    per = client.get(f"/explorations/{eid}/best", params={"manifold": "B"}).json()["poses"]
+    assert per and per[0]["pose_key"] == table[1]["best"]["key"]
+    assert client.get(f"/explorations/{eid}/best", params={"cone_x": 1}).status_code == 422
+
+    png = client.get(f"/explorations/{eid}/map.png")
+    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+    image = Image.open(io.BytesIO(png.content))
+    image.verify()
+    assert image.size[0] > 600
+    svg = client.get(f"/explorations/{eid}/map.svg", params={"cut": "vertical", "phi0_deg": 0})
+    assert svg.status_code == 200 and ET.fromstring(svg.content).tag.endswith("svg")
+
+    rows = list(csv.DictReader(io.StringIO(
+        client.get(f"/explorations/{eid}/export/poses.csv").text)))
+    assert len(rows) == len(c.samples)
+    assert {r["manifold"] for r in rows if r["viable"] == "True"} >= {"A", "B"}
+    parquet = pq.read_table(io.BytesIO(
+        client.get(f"/explorations/{eid}/export/poses.parquet").content))
+    assert parquet.num_rows == len(rows)
+    exported = client.get(f"/explorations/{eid}/export/manifolds.json").json()
+    assert [r["label"] for r in exported["table"]] == [m["name"] for m in table]
