@@ -16,6 +16,7 @@ def _worker(args: argparse.Namespace) -> int:
         "name": args.name,
         "cache_dir": args.cache_dir,
         "instant": args.instant or None,
+        "tiles_per_request": args.tiles_per_request,
     }
     config = WorkerConfig(**{k: v for k, v in options.items() if v is not None})
     return run_worker(config, args.log_level)
@@ -38,6 +39,9 @@ def register_worker(subparsers: argparse._SubParsersAction) -> None:
                         help="object cache (default: GRASPSCAPE_CACHE_DIR or ~/.cache/graspscape)")
     worker.add_argument("--instant", action="store_true",
                         help="benchmarks only: answer every pose at once without physics")
+    worker.add_argument("--tiles-per-request", type=int,
+                        help="tiles a process asks for at once (default 1; more only for "
+                        "very short tiles, as with --instant)")
     worker.add_argument("--log-level", default="info",
                         choices=["critical", "error", "warning", "info", "debug"])
     worker.set_defaults(handler=_worker)

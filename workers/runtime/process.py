@@ -16,7 +16,14 @@ import time
 from pathlib import Path
 
 import zenoh
-from graspscape.shared.specs.results import Outcome, PoseResult
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import (
+    ContactPoint,
+    GraspConfiguration,
+    GraspSignature,
+    Outcome,
+    PoseResult,
+)
 from graspscape.shared.wire import keys
 from graspscape.shared.wire.codec import decode_as, encode
 from graspscape.shared.wire.messages import (
@@ -162,8 +169,7 @@ class WorkerProcess:
 
     def _evaluate(self, tile: TileLease, obj, pose) -> PoseResult:
         if self.config.instant:
-            return PoseResult(pose=pose, pose_key=pose.key(), outcome=Outcome.NO_CONTACT,
-                              viable=False, mu_s=0.0)
+            return _instant_result(pose)
         from graspscape.workers.sim.evaluate import evaluate_pose
 
         return evaluate_pose(pose, obj=obj, gripper=tile.gripper, settings=tile.settings,
@@ -208,6 +214,34 @@ class WorkerProcess:
                           "again by the coordinator", self.worker_id, batch.tile_id)
                 return None
             time.sleep(backoff.next())
+
+
+def _instant_result(pose: Pose) -> PoseResult:
+    """A made-up held grasp the size of a real one (contacts, joint angles), for measuring
+    the dispatch and ingest ceiling with realistic messages and rows."""
+    return _INSTANT.model_copy(update={"pose": pose, "pose_key": pose.key(),
+                                       "effective_r": pose.r})
+
+
+def _instant_template() -> PoseResult:
+    pose = Pose(theta=0.0, phi=0.0, r=0.0)
+    joints = {f"joint_{i}": 0.1 * i for i in range(10)}
+    links = ("palm", "finger_1_link_1", "finger_2_link_1", "finger_middle_link_1")
+    return PoseResult(
+        pose=pose, pose_key=pose.key(), outcome=Outcome.HELD, viable=True, mu_s=0.5,
+        effective_r=pose.r, effort_max_nm=1.0, contacts_per_link=dict.fromkeys(links, 1),
+        grasp=GraspConfiguration(base_position=(0.0, 0.0, 0.1),
+                                 base_orientation=(0.0, 0.0, 0.0, 1.0), joint_angles=joints),
+        signature=GraspSignature(
+            links_in_contact=links,
+            contacts=tuple(ContactPoint(link=link, position_object=(0.01, 0.02, 0.03),
+                                        normal_force_n=2.0) for link in links),
+            joint_angles=joints,
+        ),
+    )
+
+
+_INSTANT = _instant_template()
 
 
 def _default_cache_dir() -> Path:

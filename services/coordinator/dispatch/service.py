@@ -9,6 +9,7 @@ worker retries, and both are logged and counted.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import queue
 import threading
@@ -67,6 +68,11 @@ class Dispatcher:
         self._session: zenoh.Session | None = None
         self._declared: list[Any] = []
         self._stopping = threading.Event()
+        # SQLite has one writer: handler threads that contend for it sleep in its busy
+        # handler (up to 100 ms a turn). Taking turns here instead keeps the writes back to
+        # back while decoding and replying still overlap. PostgreSQL writes concurrently.
+        backend = sessions.kw["bind"].dialect.name if sessions.kw.get("bind") else ""
+        self._store_turn = threading.Lock() if backend == "sqlite" else contextlib.nullcontext()
         self.started_at = 0.0
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -212,7 +218,7 @@ class Dispatcher:
         if isinstance(request, ErrorReply):
             return request
         n = min(request.capacity, self.zs.max_tiles_per_request)
-        with self.sessions() as session:
+        with self._store_turn, self.sessions() as session:
             lost = release_unheld(session, worker_id=request.worker_id, holding=request.holding)
             if lost:
                 self.counters.tiles_requeued.labels("reply_lost").inc(lost)
@@ -243,7 +249,7 @@ class Dispatcher:
         if isinstance(batch, ErrorReply):
             return batch
         self.counters.poses_received.inc(len(batch.results))
-        with self.sessions() as session:
+        with self._store_turn, self.sessions() as session:
             try:
                 report = ingest_results(
                     session,
@@ -309,7 +315,7 @@ class Dispatcher:
             log.warning("liveliness token on unexpected key %s", key)
             return
         self.counters.workers_lost.inc()
-        with self.sessions() as session:
+        with self._store_turn, self.sessions() as session:
             requeued, failed = requeue_lost(
                 session, worker_ids=[worker_id], max_attempts=self.settings.max_attempts
             )
@@ -340,7 +346,7 @@ class Dispatcher:
             alive = self.alive_workers()
             if alive is None:
                 return
-            with self.sessions() as session:
+            with self._store_turn, self.sessions() as session:
                 if not lease_owners(session) - alive:
                     return
                 requeued, failed = requeue_lost(
