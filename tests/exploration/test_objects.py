@@ -171,3 +171,51 @@ def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
     assert parquet.num_rows == len(rows)
     exported = client.get(f"/explorations/{eid}/export/manifolds.json").json()
     assert [r["label"] for r in exported["table"]] == [m["name"] for m in table]
+
+
+def test_symmetry_detected_from_the_mesh() -> None:
+    from graspscape.services.coordinator.exploration.symmetry import detect, hand_mirror
+    from graspscape.shared.specs.gripper import load_gripper
+    from graspscape.workers.sim.evaluate import default_cache_dir
+    from graspscape.workers.sim.objects import prepare_object
+
+    def found(name: str) -> set[str]:
+        mesh = prepare_object(ObjectSpec(name=name), default_cache_dir() / "objects").mesh
+        return {s.describe() for s in detect(mesh)}
+
+    assert found("mug") == {"mirror in the vertical plane at φ = 0.0°"}  # the handle on +x
+    cube = found("cube")
+    assert {"rotation about z by 90°", "mirror z → −z",
+            "mirror in the vertical plane at φ = 45.0°"} <= cube
+    assert hand_mirror(load_gripper("robotiq_3f")).fingers == {"A": "A", "B": "C", "C": "B"}
+
+
+def test_symmetry_shortcut_mirrors_the_cube(sessions, named_object, pool) -> None:
+    spec = ExplorationSpec(
+        object_id=named_object("cube"),
+        grid={"dtheta": math.radians(45), "r_min": 0.01, "r_max": 0.01},
+        refinement={"levels": 0},
+        shortcuts={"symmetry": True},
+    )
+    calls: list[str] = []
+    evaluate = _evaluator("cube", pool)
+
+    def counted(poses):
+        calls.extend(p.key() for p in poses)
+        return evaluate(poses)
+
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=16, max_poses=10**6).id
+    run_local(sessions, counted, workers=2)
+    with sessions() as s:
+        c = compute_map(s, eid)
+    lattice = c.lattice
+    assert len(c.samples) == len(lattice.coarse_points())  # the whole coarse grid is known
+    assert len(calls) == len(set(calls)) <= len(c.samples) / 2.5  # ≥ 2.5 poses per evaluation
+    mirrored = {s.key for s in c.samples.values() if s.source == "shortcut:symmetry"}
+    assert mirrored and not mirrored & set(calls)
+    # A mirrored face approach is the face grasp: palm and the same closure as simulated.
+    _, top = _at(c, 0, 0)
+    faces = [_at(c, 90, f)[1] for f in (0, 90, 180, 270)]
+    assert all(same_behaviour(faces[0], f) for f in faces[1:])
+    assert "palm" in top.digits

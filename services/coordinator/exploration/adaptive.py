@@ -15,8 +15,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable, Sequence
 from datetime import datetime
+from types import SimpleNamespace
 from typing import Any
 
+from graspscape.services.coordinator.exploration import symmetry
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.refine import (
     Inference,
@@ -27,6 +29,7 @@ from graspscape.services.coordinator.exploration.refine import (
     normal_decisions,
     search_proposals,
 )
+from graspscape.services.coordinator.exploration.symmetry import Orbits
 from graspscape.services.coordinator.exploration.tiling import TilePlan, coarse_tiles, group_tiles
 from graspscape.services.coordinator.manifolds.behaviour import Sample
 from graspscape.services.coordinator.store.dialect import insert_for
@@ -69,15 +72,43 @@ def lattice_of(spec: ExplorationSpec) -> Lattice:
 
 
 # --- the coarse pass -------------------------------------------------------------------------
-def plan_coarse(spec: ExplorationSpec, *, target_poses: int) -> list[TilePlan]:
+def plan_coarse(
+    spec: ExplorationSpec, *, target_poses: int, session: Session | None = None
+) -> list[TilePlan]:
     """Level-0 tiles. With normal reuse only the two r ends of each normal are evaluated
-    first; the levels between are inferred or bisected as the ends come in."""
-    if not spec.shortcuts.normal_reuse or len(spec.grid.r_levels()) <= 2:
+    first; the levels between are inferred or bisected as the ends come in. With symmetry,
+    only one pose of each orbit is evaluated; the others are mirrored from it."""
+    normal = spec.shortcuts.normal_reuse and len(spec.grid.r_levels()) > 2
+    orbits = symmetry_orbits(session, spec) if session is not None else None
+    if not normal and orbits is None:
         return coarse_tiles(spec.grid, target_poses=target_poses)
     lattice = lattice_of(spec)
     top = lattice.n_r * lattice.scale(0)
-    ends = [lattice.pose(p) for p in lattice.coarse_points() if p.I in (0, top)]
-    return group_tiles(ends, target_poses=target_poses)
+    points = [p for p in lattice.coarse_points() if not normal or p.I in (0, top)]
+    if orbits is not None:
+        points = [p for p in points if orbits.representative(p) == p]
+    return group_tiles([lattice.pose(p) for p in points], target_poses=target_poses)
+
+
+_ORBITS: dict[tuple[str, int], Orbits | None] = {}
+
+
+def symmetry_orbits(session: Session | None, spec: ExplorationSpec) -> Orbits | None:
+    """The orbits of the exploration's lattice under the object's symmetries (shortcut 3),
+    or None when the shortcut is off or the object has no usable symmetry."""
+    if session is None or not spec.shortcuts.symmetry:
+        return None
+    key = (spec.model_dump_json(), spec.object_id)
+    if key not in _ORBITS:
+        from graspscape.services.coordinator.manifolds.service import object_mesh
+        from graspscape.shared.specs.gripper import load_gripper
+
+        mesh = object_mesh(session, spec.object_id)
+        found = symmetry.detect(mesh) if mesh is not None else []
+        if symmetry.hand_mirror(load_gripper(spec.gripper)) is None:
+            found = [s for s in found if not s.reflects]
+        _ORBITS[key] = symmetry.Orbits(lattice_of(spec), found) if found else None
+    return _ORBITS[key]
 
 
 # --- loading ---------------------------------------------------------------------------------
@@ -203,8 +234,11 @@ def _enqueue(session: Session, exploration_id: int, props: list[Proposal], latti
 
 
 def _store_inferred(session: Session, exploration_id: int, inferences: list[Inference],
-                    samples: dict[Point, Sample], lattice: Lattice, now: datetime) -> int:
-    """Copies of the source results under the inferred poses' keys (worker 'shortcut:…')."""
+                    samples: dict[Point, Sample], lattice: Lattice, now: datetime,
+                    paths: dict[Point, tuple[symmetry.Symmetry, ...]] | None = None,
+                    hand: symmetry.HandMirror | None = None) -> int:
+    """Copies of the source results under the inferred poses' keys (worker 'shortcut:…');
+    with `paths`, each copy is mirrored along its point's chain of symmetries."""
     if not inferences:
         return 0
     src_keys = sorted({samples[i.source].key for i in inferences})
@@ -219,7 +253,7 @@ def _store_inferred(session: Session, exploration_id: int, inferences: list[Infe
     for inf in inferences:
         src = src_rows[samples[inf.source].key]
         pose = lattice.pose(inf.point)
-        rows.append({
+        row = {
             "exploration_id": exploration_id, "tile_id": src.tile_id, "pose_key": pose.key(),
             "theta": pose.theta, "phi": pose.phi, "r": pose.r, "roll": pose.roll,
             "pitch": pose.pitch, "yaw": pose.yaw, "outcome": src.outcome, "viable": src.viable,
@@ -227,7 +261,10 @@ def _store_inferred(session: Session, exploration_id: int, inferences: list[Infe
             "contacts_per_link": src.contacts_per_link, "signature": src.signature,
             "grasp": src.grasp, "worker_id": f"shortcut:{inf.reason}", "eval_time_s": 0.0,
             "created_at": now,
-        })
+        }
+        for sym in (paths or {}).get(inf.point, ()):
+            row = symmetry.mirror_result(row, sym, hand)
+        rows.append(row)
     table = PoseRow.__table__
     stmt = (
         insert_for(session, table)
@@ -243,11 +280,8 @@ def _store_inferred(session: Session, exploration_id: int, inferences: list[Infe
                     viable_count=ExplorationRow.viable_count + sum(returned))
             .execution_options(synchronize_session=False)
         )
-    for inf in inferences:  # the decisions that follow read the inferred results too
-        src = samples[inf.source]
-        pose = lattice.pose(inf.point)
-        samples[inf.point] = Sample(**{**src.__dict__, "key": pose.key(), "r": pose.r,
-                                       "source": f"shortcut:{inf.reason}"})
+    for inf, row in zip(inferences, rows, strict=True):  # later decisions read them too
+        samples[inf.point] = Sample.from_row(SimpleNamespace(**row))
     return len(returned)
 
 
@@ -270,6 +304,7 @@ def after_ingest(
         return
     spec = spec_of(row.spec, exploration_id)
     lattice = lattice_of(spec)
+    orbits = symmetry_orbits(session, spec)
     new_points = sorted(
         p for p in (_point_or_none(lattice, r.pose) for r in results) if p is not None
     )
@@ -277,6 +312,9 @@ def after_ingest(
         wanted: set[Point] = set(new_points)
         for p in new_points:
             wanted |= lookup_points(lattice, p)
+            if orbits is not None:
+                for q in orbits.orbit(p):
+                    wanted |= {q} | lookup_points(lattice, q)
         samples = load_samples(session, exploration_id, lattice,
                                [lattice.pose(q).key() for q in wanted])
         proposals: list[Proposal] = []
@@ -298,8 +336,11 @@ def after_ingest(
                                         [lattice.pose(q).key() for q in extra]))
             _store_inferred(session, exploration_id, inferences, samples, lattice, now)
             todo += [i.point for i in inferences]
+        if orbits is not None:
+            todo += _mirror(session, exploration_id, todo, orbits, samples, lattice, spec, now)
         for p in todo:
             proposals += border_proposals(lattice, p, samples.get, mu_step)
+        proposals = _canonical(proposals, orbits, lattice)
         proposals = [q for q in proposals if q.point not in samples]
         budget = spec.refinement.max_poses - (
             session.scalar(select(func.count()).select_from(PosePlanRow)
@@ -321,6 +362,39 @@ def after_ingest(
         from graspscape.services.coordinator.manifolds.service import maybe_refresh
 
         maybe_refresh(session, exploration_id, spec, lattice)
+
+
+def _canonical(proposals: list[Proposal], orbits: Orbits | None, lattice: Lattice
+               ) -> list[Proposal]:
+    """With symmetry, each proposal becomes its orbit's representative (evaluated once,
+    mirrored onto the rest when it arrives)."""
+    if orbits is None:
+        return proposals
+    out = []
+    for prop in proposals:
+        rep = orbits.representative(prop.point)
+        out.append(Proposal(rep, lattice.birth(rep) if prop.reason != "search" else prop.level,
+                            prop.reason))
+    return out
+
+
+def _mirror(session: Session, exploration_id: int, points: list[Point], orbits: Orbits,
+            samples: dict[Point, Sample], lattice: Lattice, spec: ExplorationSpec,
+            now: datetime) -> list[Point]:
+    """Shortcut 3: copy each new result onto the rest of its orbit; returns the new points."""
+    from graspscape.shared.specs.gripper import load_gripper
+
+    hand = symmetry.hand_mirror(load_gripper(spec.gripper))
+    todo: dict[Point, Inference] = {}
+    paths: dict[Point, tuple[symmetry.Symmetry, ...]] = {}
+    for p in points:
+        for q, path in orbits.orbit(p).items():
+            if q != p and q not in samples and q not in todo:
+                todo[q] = Inference(q, p, "symmetry")
+                paths[q] = path
+    inferences = sorted(todo.values(), key=lambda i: i.point)
+    _store_inferred(session, exploration_id, inferences, samples, lattice, now, paths, hand)
+    return [i.point for i in inferences]
 
 
 def _open_tiles(session: Session, exploration_id: int) -> bool:
@@ -353,6 +427,8 @@ def _quiescent(session: Session, exploration_id: int, spec: ExplorationSpec, lat
             maxima = local_maxima(lattice, comp, samples.get,
                                   top=spec.refinement.local_search_starts)
             proposals += search_proposals(lattice, maxima, samples.get)
+        proposals = _canonical(proposals, symmetry_orbits(session, spec), lattice)
+        proposals = [q for q in proposals if q.point not in samples]
         fresh = _plan(session, exploration_id, proposals, lattice, now)
         if fresh:
             _enqueue(session, exploration_id, fresh, lattice,

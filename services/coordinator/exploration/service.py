@@ -41,7 +41,7 @@ def create_exploration(
             "raise grid.dtheta or grid.dr, or use fewer attitudes",
             loc=("body", "grid"),
         )
-    tiles = plan_coarse(spec, target_poses=tile_target_poses)
+    tiles = plan_coarse(spec, target_poses=tile_target_poses, session=session)
     now = utcnow()
     row = ExplorationRow(
         object_id=spec.object_id,
