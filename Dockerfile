@@ -1,4 +1,4 @@
-# The graspscape image: the coordinator (and, with the dispatch issue, the workers).
+# The graspscape image: the coordinator and the workers (`graspscape worker`).
 # Copies only what the package needs, so a local .venv or data folder never enters the image.
 FROM python:3.11-slim-bookworm
 

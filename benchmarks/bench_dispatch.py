@@ -222,6 +222,7 @@ def main() -> None:
     parser.add_argument("--ceiling-dtheta", type=float, default=3.0, help="degrees")
     parser.add_argument("--instant-procs", type=int, default=2)
     parser.add_argument("--real-dtheta", type=float, default=30.0, help="degrees")
+    parser.add_argument("--repeats", type=int, default=2, help="runs of 1 and of 2 processes")
     parser.add_argument("--skip-postgres", action="store_true")
     args = parser.parse_args()
 
@@ -240,13 +241,21 @@ def main() -> None:
             print(name, "adaptive" if adaptive else "no adaptive hook", round(rate), flush=True)
     figures["ceiling_poses"] = n
 
-    # Small tiles so that two processes stay busy until close to the end.
+    # Small tiles so that two processes stay busy until close to the end. Runs of 1 and 2
+    # processes alternate and the best of each counts: the development machine is shared,
+    # and a burst of someone else's load should not decide the comparison.
     real_grid = PoseGridSpec(dtheta=math.radians(args.real_dtheta), r_min=0.01, r_max=0.03,
                              dr=0.01)
-    for procs in (1, 2):
-        with tempfile.TemporaryDirectory() as tmp:
-            rate, n = _run(f"sqlite:///{tmp}/bench.db", grid=real_grid, tile_poses=6,
-                           procs=procs, instant=False, timeout=900, every=0.25, lo=0.1, hi=0.9)
+    best = {1: 0.0, 2: 0.0}
+    for _ in range(args.repeats):
+        for procs in (1, 2):
+            with tempfile.TemporaryDirectory() as tmp:
+                rate, n = _run(f"sqlite:///{tmp}/bench.db", grid=real_grid, tile_poses=6,
+                               procs=procs, instant=False, timeout=900, every=0.25, lo=0.1,
+                               hi=0.9)
+            print(f"real, {procs} processes: {rate:.2f} poses/s", flush=True)
+            best[procs] = max(best[procs], rate)
+    for procs, rate in best.items():
         figures[f"real_{procs}_proc_poses_per_s"] = round(rate, 3)
     figures["real_poses"] = n
     figures["real_speedup_2_over_1"] = round(
@@ -265,7 +274,7 @@ def main() -> None:
                 "exploration.adaptive.after_ingest replaced by a no-op",
                 "real": f"serve + worker --procs 1|2, sphere, robotiq_3f, dtheta "
                 f"{args.real_dtheta} deg, 3 r levels, 6-pose tiles, rate between 10 % and "
-                "90 % of the poses stored",
+                f"90 % of the poses stored, best of {args.repeats} alternating runs each",
             },
             "targets": {"ceiling_poses_per_s": 5000, "real_speedup_2_over_1": 1.8},
         },

@@ -20,7 +20,9 @@ from graspscape.shared.wire.messages import ErrorReply, ObjectData, ObjectRef, O
 
 
 class ObjectFetchError(RuntimeError):
-    pass
+    def __init__(self, message: str, *, transient: bool) -> None:
+        super().__init__(message)
+        self.transient = transient  # no answer (retry later) vs. a refusal or a bad mesh
 
 
 class ObjectCache:
@@ -46,7 +48,8 @@ class ObjectCache:
                 return path
             data = self._fetch(content_hash)
             if hashlib.sha256(data.mesh()).hexdigest() != content_hash:
-                raise ObjectFetchError(f"mesh fetched for {content_hash} has another hash")
+                raise ObjectFetchError(f"mesh fetched for {content_hash} has another hash",
+                                       transient=False)
             tmp = path.with_suffix(f".tmp{os.getpid()}")
             tmp.write_bytes(data.mesh())
             os.replace(tmp, path)  # atomic: readers see the whole file or none
@@ -67,5 +70,7 @@ class ObjectCache:
                 message = decode_as(reply.err.payload.to_bytes(), ErrorReply)
             if isinstance(message, ObjectData):
                 return message
-            raise ObjectFetchError(f"mesh {content_hash}: {message.code}: {message.message}")
-        raise ObjectFetchError(f"mesh {content_hash}: no answer from the coordinator")
+            raise ObjectFetchError(f"mesh {content_hash}: {message.code}: {message.message}",
+                                   transient=message.code.retryable)
+        raise ObjectFetchError(f"mesh {content_hash}: no answer from the coordinator",
+                               transient=True)

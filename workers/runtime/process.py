@@ -36,7 +36,7 @@ from graspscape.shared.wire.messages import (
 from graspscape.shared.wire.session import zenoh_config
 from graspscape.workers.runtime.backoff import Backoff
 from graspscape.workers.runtime.config import WorkerConfig
-from graspscape.workers.runtime.objects import ObjectCache
+from graspscape.workers.runtime.objects import ObjectCache, ObjectFetchError
 
 log = logging.getLogger("graspscape.worker")
 
@@ -153,6 +153,17 @@ class WorkerProcess:
         results: list[PoseResult] = []
         try:
             obj = None if self.config.instant else self.objects.spec(tile.object)
+        except ObjectFetchError as exc:
+            if not exc.transient:  # no such mesh, or a corrupt one: the tile fails here
+                self._deliver(self._batch(tile, [], final=False, error=str(exc)))
+                return
+            # The coordinator is unreachable right now: not the tile's fault, so it goes
+            # back uncounted (delivered once the coordinator answers again).
+            log.warning("%s: tile %d handed back: %s", self.worker_id, tile.tile_id, exc)
+            self._deliver(self._batch(tile, [], final=False, release=True))
+            self.stop.wait(self.config.backoff_max_s)
+            return
+        try:
             for pose in poses:
                 if self.stop.is_set():
                     break

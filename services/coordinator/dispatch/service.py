@@ -109,8 +109,16 @@ class Dispatcher:
     def _open(self) -> None:
         # A client only connects (to routers); only the embedded peer listens.
         listen = self.zs.listen if self.zs.mode == "peer" else []
+        # A client without its router fails after 5 s and is retried by start(); a peer
+        # opens at once and keeps dialling its routers in the background.
         session = zenoh.open(
-            zenoh_config(mode=self.zs.mode, listen=listen, connect=self.zs.connect)
+            zenoh_config(
+                mode=self.zs.mode,
+                listen=listen,
+                connect=self.zs.connect,
+                connect_timeout_ms=5000,
+                exit_on_failure=self.zs.mode == "client",
+            )
         )
         self._session = session
         for _ in range(self.zs.handler_threads):
