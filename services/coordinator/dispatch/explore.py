@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+import signal
 import socket
 import sys
 import time
@@ -176,8 +177,14 @@ def run_explore(opts: ExploreOptions) -> int:
         interrupted = True
         say("\ninterrupted: workers finish their pose and hand the rest back ...")
     finally:
-        supervisor.shutdown()  # while the dispatch still runs, so releases are acknowledged
-        dispatcher.stop()
+        # A second Ctrl-C must not cut the clean-up short: an open zenoh session would keep
+        # the interpreter from exiting, and unreleased tiles would wait for expiry.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            supervisor.shutdown()  # while the dispatch runs, so releases are acknowledged
+        finally:
+            dispatcher.stop()
+            signal.signal(signal.SIGINT, previous)
     elapsed = time.monotonic() - started
     with sessions() as session:
         failed = session.scalar(
