@@ -269,15 +269,20 @@ def _store_inferred(session: Session, exploration_id: int, inferences: list[Infe
     stmt = (
         insert_for(session, table)
         .on_conflict_do_nothing(index_elements=[table.c.exploration_id, table.c.pose_key])
-        .returning(table.c.viable)
+        .returning(table.c.pose_key, table.c.viable)
     )
-    returned = [bool(v) for (v,) in session.connection().execute(stmt, rows)]
+    returned = dict(session.connection().execute(stmt, rows).all())
     if returned:
+        # Coarse poses were counted in poses_total at submission; finer ones were not.
+        finer = sum(1 for inf in inferences
+                    if lattice.birth(inf.point) > 0 and lattice.pose(inf.point).key() in returned)
         session.execute(
             update(ExplorationRow)
             .where(ExplorationRow.id == exploration_id)
             .values(poses_done=ExplorationRow.poses_done + len(returned),
-                    viable_count=ExplorationRow.viable_count + sum(returned))
+                    poses_total=ExplorationRow.poses_total + finer,
+                    viable_count=ExplorationRow.viable_count
+                    + sum(1 for v in returned.values() if v))
             .execution_options(synchronize_session=False)
         )
     for inf, row in zip(inferences, rows, strict=True):  # later decisions read them too
@@ -312,9 +317,6 @@ def after_ingest(
         wanted: set[Point] = set(new_points)
         for p in new_points:
             wanted |= lookup_points(lattice, p)
-            if orbits is not None:
-                for q in orbits.orbit(p):
-                    wanted |= {q} | lookup_points(lattice, q)
         samples = load_samples(session, exploration_id, lattice,
                                [lattice.pose(q).key() for q in wanted])
         proposals: list[Proposal] = []
@@ -331,12 +333,22 @@ def after_ingest(
             extra = set()
             for inf in inferences:
                 extra |= lookup_points(lattice, inf.point)
-            extra -= set(samples)
+            extra -= wanted
+            wanted |= extra
             samples.update(load_samples(session, exploration_id, lattice,
                                         [lattice.pose(q).key() for q in extra]))
             _store_inferred(session, exploration_id, inferences, samples, lattice, now)
             todo += [i.point for i in inferences]
         if orbits is not None:
+            # Every image's neighbours must be at hand: a pair missed now is missed for good.
+            extra = set()
+            for p in todo:
+                for q in orbits.orbit(p):
+                    extra |= {q} | lookup_points(lattice, q)
+            extra -= wanted
+            wanted |= extra
+            samples.update(load_samples(session, exploration_id, lattice,
+                                        [lattice.pose(q).key() for q in extra]))
             todo += _mirror(session, exploration_id, todo, orbits, samples, lattice, spec, now)
         for p in todo:
             proposals += border_proposals(lattice, p, samples.get, mu_step)

@@ -121,7 +121,9 @@ def _draw_cut(ax: Any, field: dict[str, Any], mmap: ManifoldMap, lattice: Lattic
     n = max(1, len(mmap.manifolds))
     cmap = ListedColormap([_COLOURS[i % 10] for i in range(n)])
     shown = np.ma.masked_invalid(np.where(labels >= 0, labels, np.nan))
-    ax.pcolormesh(X, Y, shown, cmap=cmap, vmin=-0.5, vmax=n - 0.5, alpha=0.45, shading="auto")
+    # Raster inside the SVG too: a vector cell per pixel would make a 10 MB file.
+    ax.pcolormesh(X, Y, shown, cmap=cmap, vmin=-0.5, vmax=n - 0.5, alpha=0.45, shading="auto",
+                  rasterized=True)
     non = np.where(labels == -1, 1.0, np.nan)
     if np.isfinite(non).any():
         ax.contourf(X, Y, np.ma.masked_invalid(non), levels=[0.5, 1.5], colors="none",
@@ -171,11 +173,12 @@ def _draw_3d(ax: Any, lattice: Lattice, samples: Mapping[Point, Sample],
         rho = surface_radii(mesh, dirs, FALLBACK_RADIUS)
         pos = dirs * (rho + np.array([samples[p].r for p in pts]))[:, None]
         colours = [_COLOURS[label_of.get(p, 0) % 10] for p in pts]
-        ax.scatter(pos[:, 0], pos[:, 1], pos[:, 2], c=colours, s=6, depthshade=False)
+        ax.scatter(pos[:, 0], pos[:, 1], pos[:, 2], c=colours, s=6, depthshade=False,
+                   rasterized=True)
     if mesh is not None and len(mesh.faces) <= 20000:
         v = mesh.vertices
         ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=mesh.faces, color="0.6",
-                        alpha=0.25, linewidth=0)
+                        alpha=0.25, linewidth=0, rasterized=True)
     ax.set_title("viable reference-point positions (all attitudes)", fontsize=9)
 
 
