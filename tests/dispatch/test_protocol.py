@@ -259,3 +259,18 @@ def test_mesh_is_fetched_once_and_checked(
     assert Path(spec.mesh_path).read_bytes() == data
     assert second.spec(ref).mesh_path == spec.mesh_path
     assert (first.fetched, second.fetched) == (1, 0)
+
+
+def test_lease_context_follows_a_reused_exploration_id(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    from graspscape.services.coordinator.exploration.service import delete_exploration
+
+    first = submit(any_sessions, tile_poses=3, object_name="sphere")
+    (tile,) = lease(client, "w-1")
+    assert tile.object.name == "sphere"
+    with any_sessions() as session:
+        delete_exploration(session, exploration_id=first)
+    submit(any_sessions, tile_poses=3, object_name="cube")  # SQLite may reuse the id
+    (tile,) = lease(client, "w-1")
+    assert tile.object.name == "cube"

@@ -1,13 +1,15 @@
 """What a lease reply needs besides the tile: the object reference, gripper and settings.
 
 An exploration's spec and its object never change after submission, so they are read once per
-exploration and kept (a lease reply then costs no extra query).
+exploration and kept. The cache key includes the exploration's creation time: SQLite may give
+a deleted exploration's id to a new one, which must not inherit the old object and gripper.
 """
 
 from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
+from datetime import datetime
 
 from graspscape.services.coordinator.store.models import ExplorationRow, ObjectRow
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -28,12 +30,29 @@ class WorkContext:
 
 class Catalog:
     def __init__(self) -> None:
-        self._contexts: dict[int, WorkContext] = {}
+        self._contexts: dict[tuple[int, datetime], WorkContext] = {}
         self._lock = threading.Lock()
 
-    def context(self, session: Session, exploration_id: int) -> WorkContext:
+    def contexts(self, session: Session, exploration_ids: set[int]) -> dict[int, WorkContext]:
+        """The context of each exploration (one small query, plus one per uncached one)."""
+        if not exploration_ids:
+            return {}
+        created = dict(session.execute(
+            select(ExplorationRow.id, ExplorationRow.created_at)
+            .where(ExplorationRow.id.in_(exploration_ids))
+        ).all())
+        out = {}
+        for exploration_id in exploration_ids:
+            if exploration_id not in created:
+                raise LookupError(f"exploration {exploration_id} does not exist")
+            out[exploration_id] = self.context(session, exploration_id,
+                                               created[exploration_id])
+        return out
+
+    def context(self, session: Session, exploration_id: int, created_at: datetime) -> WorkContext:
+        key = (exploration_id, created_at)
         with self._lock:
-            found = self._contexts.get(exploration_id)
+            found = self._contexts.get(key)
         if found is not None:
             return found
         spec_json = session.scalar(
@@ -62,7 +81,7 @@ class Catalog:
         with self._lock:
             if len(self._contexts) >= _MAX_CACHED:
                 self._contexts.clear()
-            self._contexts[exploration_id] = context
+            self._contexts[key] = context
         return context
 
 

@@ -49,6 +49,13 @@ def release_unheld(
 ) -> int:
     """Tiles leased to a worker that says it does not hold them: their lease reply was lost."""
     now = now or utcnow()
+    # Almost always nothing to release: a read first keeps the common case free of a write
+    # transaction (SQLite has a single writer).
+    held = set(session.scalars(select(TileRow.id).where(
+        TileRow.state == TileState.LEASED, TileRow.lease_owner == worker_id)))
+    if not held - set(holding):
+        session.rollback()  # end the read transaction
+        return 0
     stmt = update(TileRow).where(
         TileRow.state == TileState.LEASED, TileRow.lease_owner == worker_id
     )

@@ -64,6 +64,7 @@ class Dispatcher:
         self.counters = DispatchCounters(registry)
         self.catalog = Catalog()
         self._work: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
+        self._lost_keys: queue.SimpleQueue[str | None] = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
         self._session: zenoh.Session | None = None
         self._declared: list[Any] = []
@@ -125,6 +126,9 @@ class Dispatcher:
             thread = threading.Thread(target=self._serve, name="dispatch", daemon=True)
             thread.start()
             self._threads.append(thread)
+        watcher = threading.Thread(target=self._watch_lost, name="dispatch-lost", daemon=True)
+        watcher.start()
+        self._threads.append(watcher)
         s = self._session
         self._declared = [
             s.declare_queryable(keys.LEASE_QUERYABLE, self._enqueue("lease")),
@@ -145,6 +149,7 @@ class Dispatcher:
 
     def stop(self) -> None:
         self._stopping.set()
+        self._lost_keys.put(None)
         for entity in self._declared:
             try:
                 entity.undeclare()
@@ -182,7 +187,7 @@ class Dispatcher:
     def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
             if sample.kind == zenoh.SampleKind.DELETE:
-                self._work.put(("lost", str(sample.key_expr)), timeout=5)
+                self._lost_keys.put(str(sample.key_expr))  # unbounded: never blocks
         except Exception:
             self.counters.errors.labels("liveliness", "callback").inc()
             log.exception("liveliness callback failed")
@@ -196,9 +201,6 @@ class Dispatcher:
                 return
             kind, payload = item
             try:
-                if kind == "lost":
-                    self._lost(payload)
-                    continue
                 with payload:  # the final reply goes out when the query is dropped
                     self._answer(kind, payload)
             except Exception:
@@ -240,8 +242,9 @@ class Dispatcher:
                 host=request.host,
                 capacity=request.capacity,
             )
-            contexts = [self.catalog.context(session, t.exploration_id) for t in tiles]
-        for tile, ctx in zip(tiles, contexts, strict=True):
+            contexts = self.catalog.contexts(session, {t.exploration_id for t in tiles})
+        for tile in tiles:
+            ctx = contexts[tile.exploration_id]
             message = TileLease(
                 **tile.model_dump(),
                 object=ctx.object,
@@ -315,6 +318,18 @@ class Dispatcher:
         return None
 
     # -- lost workers ----------------------------------------------------------------------
+
+    def _watch_lost(self) -> None:
+        while True:
+            key = self._lost_keys.get()
+            if key is None:
+                return
+            try:
+                self._lost(key)
+            except Exception:
+                self.counters.errors.labels("liveliness", "handler").inc()
+                log.exception("re-queueing the tiles of %s failed; lease expiry remains the "
+                              "backstop", key)
 
     def _lost(self, key: str) -> None:
         worker_id = keys.worker_of_alive_key(key)
