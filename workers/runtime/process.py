@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import socket
 import threading
 import time
 from pathlib import Path
@@ -121,7 +122,7 @@ class WorkerProcess:
     def _lease(self) -> list[TileLease]:
         request = LeaseRequest(
             worker_id=self.worker_id,
-            host=self.config.name,
+            host=socket.gethostname()[:255],
             capacity=self.config.tiles_per_request,
         )
         tiles: list[TileLease] = []
