@@ -44,17 +44,20 @@ def _finish(sessions: sessionmaker[Session], exploration_id: int, timeout: float
 
 
 def test_two_workers_with_two_processes_each_finish(
-    coordinator: Coordinator, sqlite_sessions: sessionmaker[Session], tmp_path: Path
+    any_url: str, any_sessions: sessionmaker[Session], tmp_path: Path
 ) -> None:
-    exploration_id = submit(sqlite_sessions, tile_poses=3)
+    # On both databases: leasing (SKIP LOCKED) and ingest (unnest arrays) differ on PostgreSQL.
+    coordinator = Coordinator(any_url, tmp_path, free_port())
+    exploration_id = submit(any_sessions, tile_poses=3)
     workers = [Worker(coordinator.endpoint, 2, f"w{i}", tmp_path / "cache") for i in range(2)]
     try:
-        _finish(sqlite_sessions, exploration_id, 120, *workers)
+        _finish(any_sessions, exploration_id, 120, *workers)
     finally:
         codes = [w.stop() for w in workers]
+        coordinator.stop()
     assert codes == [0, 0]
-    assert_complete(sqlite_sessions, exploration_id)
-    with sqlite_sessions() as session:
+    assert_complete(any_sessions, exploration_id)
+    with any_sessions() as session:
         owners = set(session.scalars(select(PoseRow.worker_id)))
     # Work was spread over processes of both workers.
     assert {o.split("-")[0] for o in owners} == {"w0", "w1"}
