@@ -13,7 +13,6 @@ import contextlib
 import logging
 import queue
 import threading
-import time
 from typing import Any
 
 import zenoh
@@ -74,7 +73,6 @@ class Dispatcher:
         # back while decoding and replying still overlap. PostgreSQL writes concurrently.
         backend = sessions.kw["bind"].dialect.name if sessions.kw.get("bind") else ""
         self._store_turn = threading.Lock() if backend == "sqlite" else contextlib.nullcontext()
-        self.started_at = 0.0
 
     # -- lifecycle -----------------------------------------------------------------------
 
@@ -88,7 +86,6 @@ class Dispatcher:
         A listen endpoint that is taken (another coordinator on this host) must not take the
         REST API down with it: the failure is logged and counted, and retried every few s.
         """
-        self.started_at = time.monotonic()
         try:
             self._open()
         except Exception as exc:
