@@ -68,6 +68,7 @@ def _explore(args: argparse.Namespace) -> int:
         "r_max": args.r_max,
         "dr": args.dr,
         "rolls": args.rolls,
+        "levels": args.levels,
         "procs": args.procs,
         "data_dir": args.data_dir,
         "mass_kg": args.mass,
@@ -163,6 +164,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     explore.add_argument("--r-max", type=float, help=f"largest start gap, m ({DEFAULT_R[1]})")
     explore.add_argument("--dr", type=float, help=f"start gap step, m ({DEFAULT_R[2]})")
     explore.add_argument("--rolls", type=int, choices=[1, 2, 4, 8], help="rolls per point (1)")
+    explore.add_argument("--levels", type=int, choices=range(7), metavar="{0..6}",
+                         help="border refinement levels (1): halvings of the grid where "
+                         "neighbouring poses differ")
     explore.add_argument("--procs", type=int, help="worker processes (default: cores)")
     explore.add_argument(
         "--data-dir", type=Path, help="folder of the database and results (default data)"

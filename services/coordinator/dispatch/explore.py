@@ -17,10 +17,15 @@ import time
 from pathlib import Path
 
 from graspscape.services.coordinator import db
-from graspscape.services.coordinator.dispatch.explore_defaults import DEFAULT_DTHETA_DEG, DEFAULT_R
+from graspscape.services.coordinator.dispatch.explore_defaults import (
+    DEFAULT_DTHETA_DEG,
+    DEFAULT_LEVELS,
+    DEFAULT_R,
+)
 from graspscape.services.coordinator.dispatch.leases import requeue_lost
 from graspscape.services.coordinator.dispatch.service import Dispatcher
 from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.maps.picture import write_map_files
 from graspscape.services.coordinator.objects.service import create_named, create_uploaded
 from graspscape.services.coordinator.settings import Settings, ZenohSettings
 from graspscape.services.coordinator.store.models import (
@@ -46,6 +51,7 @@ class ExploreOptions(BaseModel):
     r_max: float = DEFAULT_R[1]
     dr: float = DEFAULT_R[2]
     rolls: int = 1
+    levels: int = Field(default=DEFAULT_LEVELS, ge=0, le=6)
     procs: int = Field(default_factory=default_procs, ge=1)
     data_dir: Path = Path("data")
     mass_kg: float | None = None
@@ -127,7 +133,7 @@ def run_explore(opts: ExploreOptions) -> int:
         gripper=opts.gripper,
         grid=PoseGridSpec(dtheta=math.radians(opts.dtheta_deg), r_min=opts.r_min,
                           r_max=opts.r_max, dr=opts.dr, attitudes={"rolls": opts.rolls}),
-        refinement=RefinementSpec(levels=0),
+        refinement=RefinementSpec(levels=opts.levels),
         label=f"graspscape explore {opts.object}",
     )
     with sessions() as session:
@@ -192,6 +198,11 @@ def run_explore(opts: ExploreOptions) -> int:
                 TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED))
         csv_path = data_dir / f"exploration-{exploration_id}.csv"
         n = _export_csv(session, exploration_id, csv_path)
+        map_path = data_dir / f"exploration-{exploration_id}-map.png"
+        table_path = data_dir / f"exploration-{exploration_id}-manifolds.json"
+        manifolds = None
+        if n and not interrupted:
+            manifolds, _ = write_map_files(session, exploration_id, map_path, table_path)
     engine.dispose()
     say("")
     if interrupted:
@@ -200,6 +211,8 @@ def run_explore(opts: ExploreOptions) -> int:
     else:
         say(f"{status}: {n} poses in {elapsed:.0f} s, {failed} tiles failed")
     print(f"results: {csv_path}")
+    if manifolds is not None:
+        print(f"map: {map_path} ({manifolds} behavioral manifolds; table: {table_path})")
     print(f"database: {data_dir / 'coordinator.db'} (exploration {exploration_id}); browse with "
           f"`graspscape serve --data-dir {data_dir}` and GET "
           f"/explorations/{exploration_id}/poses")

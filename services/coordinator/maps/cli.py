@@ -74,18 +74,12 @@ def _sessions(url: str | None) -> Any:
 
 
 def _write_picture(sessions: Any, exploration_id: int, args: argparse.Namespace) -> None:
-    from graspscape.services.coordinator.manifolds.service import compute_map, ensure_manifolds
-    from graspscape.services.coordinator.maps.render import render_map
+    from graspscape.services.coordinator.maps.picture import write_map_files
 
     with sessions() as session:
-        ensure_manifolds(session, exploration_id)
-        c = compute_map(session, exploration_id)
-    fmt = "svg" if args.out.suffix.lower() == ".svg" else "png"
-    data = render_map(c.lattice, c.samples, c.label_of, c.map, c.mesh, cut=args.cut,
-                      phi0=math.radians(args.phi0), attitude=args.attitude, fmt=fmt,
-                      title=f"{c.spec.label or ''}".strip())
-    args.out.write_bytes(data)
-    print(f"{args.out}: {len(c.map.manifolds)} manifolds, {len(c.samples)} poses")
+        manifolds, poses = write_map_files(session, exploration_id, args.out, cut=args.cut,
+                                           phi0_deg=args.phi0, attitude=args.attitude)
+    print(f"{args.out}: {manifolds} manifolds, {poses} poses")
 
 
 def _show(args: argparse.Namespace) -> int:

@@ -1,0 +1,31 @@
+"""`graspscape explore`: the one local command runs coordinator, zenoh and workers end to end
+and leaves the results, the map picture and the manifold table where it says."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+
+def test_explore_maps_an_object_on_this_machine(tmp_path: Path):
+    command = [sys.executable, "-m", "graspscape.shared.cli", "explore", "sphere",
+               "--dtheta", "60", "--r-min", "0.02", "--r-max", "0.02", "--levels", "0",
+               "--procs", "1", "--data-dir", str(tmp_path), "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=240)
+    assert run.returncode == 0, run.stderr
+    results = Path(re.search(r"results: (\S+)", run.stdout).group(1))
+    picture = Path(re.search(r"map: (\S+)", run.stdout).group(1))
+    table = Path(re.search(r"table: (\S+)\)", run.stdout).group(1))
+    with results.open() as fh:
+        rows = list(csv.DictReader(fh))
+    keys = [row["pose_key"] for row in rows]
+    assert keys and len(keys) == len(set(keys))  # every pose once
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    manifolds = json.loads(table.read_text())
+    # A sphere grasped from anywhere is one kind of grasp.
+    assert [m["name"] for m in manifolds] == ["A"]
+    assert "pybullet build time" not in run.stderr
