@@ -309,6 +309,10 @@ def after_ingest(
         return
     spec = spec_of(row.spec, exploration_id)
     lattice = lattice_of(spec)
+    if lattice.depth == 0 and not (spec.shortcuts.normal_reuse or spec.shortcuts.symmetry):
+        # Coarse pass only, no shortcuts: no batch can lead to more work, and the manifolds
+        # are computed on request; ingest stays at the store's own speed.
+        return
     orbits = symmetry_orbits(session, spec)
     new_points = sorted(
         p for p in (_point_or_none(lattice, r.pose) for r in results) if p is not None
