@@ -11,10 +11,6 @@ migrated to head. Writes benchmarks/results/ingest.json.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import json
-import os
-import platform
 import sys
 import tempfile
 import time
@@ -33,9 +29,9 @@ from graspscape.services.coordinator.store.models import ObjectRow  # noqa: E402
 from graspscape.services.coordinator.store.queue import lease_tiles  # noqa: E402
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec  # noqa: E402
 
+from benchmarks._results import write_results  # noqa: E402
 from tests.coordinator.helpers import fake_results  # noqa: E402
 
-RESULTS = REPO / "benchmarks" / "results" / "ingest.json"
 PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 LEASE_CHUNK = 16  # tiles a worker asks for at once
 
@@ -77,23 +73,6 @@ def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
     return {"poses": poses, "batches": batches, "seconds": busy, "poses_per_s": poses / busy}
 
 
-def machine() -> str:
-    cpu = platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu} · {os.cpu_count()} cores · Python {platform.python_version()}"
-
-
-def _python() -> str:
-    exe = Path(sys.executable)
-    return str(exe.relative_to(REPO)) if exe.is_relative_to(REPO) else "python"
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="ingest time per backend")
@@ -123,22 +102,7 @@ def main() -> int:
     print(f"postgresql: {pg}")
     figures["ingest_poses_per_s_postgres"] = round(pg["poses_per_s"])
 
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(
-        json.dumps(
-            {
-                "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-                "machine": machine(),
-                "command": " ".join([_python(), *sys.argv]),
-                "figures": figures,
-            },
-            indent=2,
-            ensure_ascii=False,
-        )
-        + "\n"
-    )
-    print(json.dumps(figures, indent=2))
-    print(f"wrote {RESULTS}")
+    write_results("ingest", figures)
     return 0
 
 
