@@ -14,8 +14,8 @@ from datetime import datetime
 
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import TileRow, TileState
-from graspscape.services.coordinator.store.queue import finish_complete_explorations
-from sqlalchemy import literal, select, update
+from graspscape.services.coordinator.store.queue import requeue_where
+from sqlalchemy import ColumnElement, literal, select, update
 from sqlalchemy.orm import Session
 
 
@@ -89,39 +89,19 @@ def requeue_lost(
     after a coordinator start).
     """
     now = now or utcnow()
-    owned = [TileRow.state == TileState.LEASED]
+    owned: list[ColumnElement[bool]] = []
     if worker_ids is not None:
         owned.append(TileRow.lease_owner.in_(list(worker_ids)))
     if alive is not None:
         owned.append(TileRow.lease_owner.not_in(list(alive)) if alive else literal(True))
-    failed = session.execute(
-        update(TileRow)
-        .where(*owned, TileRow.attempts >= max_attempts)
-        .values(
-            state=TileState.FAILED,
-            last_error=literal("worker ") + TileRow.lease_owner + literal(" lost on last attempt"),
-            lease_owner=None,
-            lease_expires_at=None,
-            updated_at=now,
-        )
-        .returning(TileRow.exploration_id)
-        .execution_options(synchronize_session=False)
-    ).all()
-    requeued = session.execute(
-        update(TileRow)
-        .where(*owned)
-        .values(
-            state=TileState.QUEUED,
-            last_error=literal("worker ") + TileRow.lease_owner + literal(" lost"),
-            lease_owner=None,
-            lease_expires_at=None,
-            updated_at=now,
-        )
-        .execution_options(synchronize_session=False)
+    return requeue_where(
+        session,
+        owned,
+        max_attempts=max_attempts,
+        now=now,
+        failed_error=literal("worker ") + TileRow.lease_owner + literal(" lost on last attempt"),
+        requeued_error=literal("worker ") + TileRow.lease_owner + literal(" lost"),
     )
-    finish_complete_explorations(session, {row[0] for row in failed}, now=now)
-    session.commit()
-    return requeued.rowcount, len(failed)  # type: ignore[attr-defined]
 
 
 def lease_owners(session: Session) -> set[str]:

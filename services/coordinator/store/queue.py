@@ -10,7 +10,7 @@ stored but never moves the tile again.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -28,7 +28,7 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.services.coordinator.store.workers import touch_worker
 from graspscape.shared.specs.pose import Pose
 from pydantic import BaseModel, ConfigDict
-from sqlalchemy import String, case, cast, literal, select, update
+from sqlalchemy import ColumnElement, String, case, cast, literal, select, update
 from sqlalchemy.orm import Session
 
 
@@ -207,20 +207,27 @@ def fail_tile(
     return row.state
 
 
-def requeue_expired(
-    session: Session, *, max_attempts: int, now: datetime | None = None
-) -> RequeueReport:
-    """Put leased tiles whose lease ran out back in the queue (or fail them at the cap)."""
-    now = now or utcnow()
-    expired = (TileRow.state == TileState.LEASED, TileRow.lease_expires_at < now)
+def requeue_where(
+    session: Session,
+    conditions: Sequence[ColumnElement[bool]],
+    *,
+    max_attempts: int,
+    now: datetime,
+    failed_error: ColumnElement[str],
+    requeued_error: ColumnElement[str],
+) -> tuple[int, int]:
+    """Leased tiles matching `conditions` back to the queue, or failed once their attempts
+    reached the cap; one transaction. Returns (requeued, failed).
+
+    The one mechanism behind lease expiry and lost workers, so both count attempts alike.
+    """
+    leased = (TileRow.state == TileState.LEASED, *conditions)
     failed_rows = session.execute(
         update(TileRow)
-        .where(*expired, TileRow.attempts >= max_attempts)
+        .where(*leased, TileRow.attempts >= max_attempts)
         .values(
             state=TileState.FAILED,
-            last_error=literal("lease expired on attempt ")
-            + cast(TileRow.attempts, String)
-            + literal(f" of {max_attempts}"),
+            last_error=failed_error,
             lease_owner=None,
             lease_expires_at=None,
             updated_at=now,
@@ -230,10 +237,10 @@ def requeue_expired(
     ).all()
     requeued = session.execute(
         update(TileRow)
-        .where(*expired)
+        .where(*leased)
         .values(
             state=TileState.QUEUED,
-            last_error=literal("lease of ") + TileRow.lease_owner + literal(" expired"),
+            last_error=requeued_error,
             lease_owner=None,
             lease_expires_at=None,
             updated_at=now,
@@ -242,7 +249,25 @@ def requeue_expired(
     )
     finish_complete_explorations(session, {row[0] for row in failed_rows}, now=now)
     session.commit()
-    return RequeueReport(requeued=requeued.rowcount, failed=len(failed_rows))  # type: ignore[attr-defined]
+    return requeued.rowcount, len(failed_rows)  # type: ignore[attr-defined]
+
+
+def requeue_expired(
+    session: Session, *, max_attempts: int, now: datetime | None = None
+) -> RequeueReport:
+    """Put leased tiles whose lease ran out back in the queue (or fail them at the cap)."""
+    now = now or utcnow()
+    requeued, failed = requeue_where(
+        session,
+        [TileRow.lease_expires_at < now],
+        max_attempts=max_attempts,
+        now=now,
+        failed_error=literal("lease expired on attempt ")
+        + cast(TileRow.attempts, String)
+        + literal(f" of {max_attempts}"),
+        requeued_error=literal("lease of ") + TileRow.lease_owner + literal(" expired"),
+    )
+    return RequeueReport(requeued=requeued, failed=failed)
 
 
 def finish_complete_explorations(
