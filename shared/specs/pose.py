@@ -39,3 +39,18 @@ class Pose(BaseModel):
             roll += 2 * math.pi
         parts = (self.theta, phi, self.r, roll, self.pitch, self.yaw)
         return "/".join(f"{round(v, _KEY_DIGITS) + 0.0:.{_KEY_DIGITS}f}" for v in parts)
+
+
+def tile_poses(
+    cells: list[tuple[float, float]] | list[list[float]],
+    r_levels: list[float],
+    attitudes: list[tuple[float, float, float]] | list[list[float]],
+) -> list[Pose]:
+    """Every pose a tile covers, in one fixed order: cells × r levels × attitudes (roll,
+    pitch, yaw). Coordinator and workers both expand tiles with this, so keys agree."""
+    return [
+        Pose(theta=theta, phi=phi, r=r, roll=roll, pitch=pitch, yaw=yaw)
+        for theta, phi in cells
+        for r in r_levels
+        for roll, pitch, yaw in attitudes
+    ]

@@ -14,7 +14,7 @@ from enum import StrEnum
 from typing import Annotated, Any, Literal
 
 from graspscape.shared.specs.objects import ObjectSpec
-from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.pose import Pose, tile_poses
 from graspscape.shared.specs.results import PoseResult
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.shared.wire.keys import WORKER_ID_PATTERN
@@ -80,9 +80,6 @@ class TileLease(_Message):
     settings: SimSettings
 
     def poses(self) -> list[Pose]:
-        # The same expansion as the coordinator's, so pose keys agree on both sides.
-        from graspscape.services.coordinator.exploration.tiling import tile_poses
-
         return tile_poses(self.cells, self.r_levels, self.attitudes)
 
 

@@ -9,9 +9,9 @@ from graspscape.services.coordinator.exploration.tiling import (
     coarse_tiles,
     count_poses,
     rings,
-    tile_poses,
 )
 from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
+from graspscape.shared.specs.pose import tile_poses
 from pydantic import ValidationError
 
 

@@ -157,7 +157,7 @@ def assert_complete(sessions: sessionmaker[Session], exploration_id: int) -> Non
             select(TileRow.cells, TileRow.r_levels, TileRow.attitudes)
             .where(TileRow.exploration_id == exploration_id)
         ):
-            from graspscape.services.coordinator.exploration.tiling import tile_poses
+            from graspscape.shared.specs.pose import tile_poses
 
             expected |= {p.key() for p in tile_poses(cells, r_levels, attitudes)}
         counts = dict(session.execute(

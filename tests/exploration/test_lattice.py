@@ -6,8 +6,9 @@ import math
 
 import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.tiling import coarse_tiles, group_tiles, tile_poses
+from graspscape.services.coordinator.exploration.tiling import coarse_tiles, group_tiles
 from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
+from graspscape.shared.specs.pose import tile_poses
 
 GRIDS = [
     PoseGridSpec(dtheta=math.radians(30), r_max=0.02, dr=0.01),

@@ -88,15 +88,3 @@ def group_tiles(
     return tiles
 
 
-def tile_poses(
-    cells: list[Cell] | list[list[float]],
-    r_levels: list[float],
-    attitudes: list[Attitude] | list[list[float]],
-) -> list[Pose]:
-    """Every pose a tile covers (accepts the JSON-decoded lists stored on a tile row)."""
-    return [
-        Pose(theta=theta, phi=phi, r=r, roll=roll, pitch=pitch, yaw=yaw)
-        for theta, phi in cells
-        for r in r_levels
-        for roll, pitch, yaw in attitudes
-    ]

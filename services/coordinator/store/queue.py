@@ -15,7 +15,6 @@ from datetime import datetime, timedelta
 from typing import Any
 
 from graspscape.services.coordinator.errors import NotFound
-from graspscape.services.coordinator.exploration.tiling import tile_poses
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.dialect import is_postgres
 from graspscape.services.coordinator.store.models import (
@@ -26,7 +25,7 @@ from graspscape.services.coordinator.store.models import (
     TileState,
 )
 from graspscape.services.coordinator.store.workers import touch_worker
-from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.pose import Pose, tile_poses
 from pydantic import BaseModel, ConfigDict
 from sqlalchemy import ColumnElement, String, case, cast, literal, select, update
 from sqlalchemy.orm import Session
