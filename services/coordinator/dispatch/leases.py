@@ -14,7 +14,7 @@ from datetime import datetime
 
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import TileRow, TileState
-from graspscape.services.coordinator.store.queue import requeue_where
+from graspscape.services.coordinator.store.queue import held_under, requeue_where
 from sqlalchemy import ColumnElement, literal, select, update
 from sqlalchemy.orm import Session
 
@@ -26,11 +26,7 @@ def release_tile(
     now = now or utcnow()
     result = session.execute(
         update(TileRow)
-        .where(
-            TileRow.id == tile_id,
-            TileRow.state == TileState.LEASED,
-            TileRow.lease_epoch == lease_epoch,
-        )
+        .where(*held_under(tile_id, lease_epoch))
         .values(
             state=TileState.QUEUED,
             attempts=TileRow.attempts - 1,

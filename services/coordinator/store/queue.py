@@ -135,6 +135,16 @@ def lease_tiles(
     return leased
 
 
+def held_under(tile_id: int, lease_epoch: int) -> tuple[ColumnElement[bool], ...]:
+    """The tile is leased, under the lease a worker reports for: the one condition every
+    worker report must meet before it may move a tile."""
+    return (
+        TileRow.id == tile_id,
+        TileRow.state == TileState.LEASED,
+        TileRow.lease_epoch == lease_epoch,
+    )
+
+
 def renew_lease(
     session: Session,
     *,
@@ -147,11 +157,7 @@ def renew_lease(
     now = now or utcnow()
     result = session.execute(
         update(TileRow)
-        .where(
-            TileRow.id == tile_id,
-            TileRow.state == TileState.LEASED,
-            TileRow.lease_epoch == lease_epoch,
-        )
+        .where(*held_under(tile_id, lease_epoch))
         .values(lease_expires_at=now + timedelta(seconds=lease_seconds), updated_at=now)
         .execution_options(synchronize_session=False)
     )
@@ -176,11 +182,7 @@ def fail_tile(
     # One conditional UPDATE: atomic against the sweeper and a re-lease on both databases.
     row = session.execute(
         update(TileRow)
-        .where(
-            TileRow.id == tile_id,
-            TileRow.state == TileState.LEASED,
-            TileRow.lease_epoch == lease_epoch,
-        )
+        .where(*held_under(tile_id, lease_epoch))
         .values(
             state=case(
                 (TileRow.attempts >= max_attempts, TileState.FAILED.value),
