@@ -12,10 +12,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from graspscape.shared.specs.gripper import load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.sim import MetricSettings, SimSettings
-from graspscape.workers.sim.evaluate import default_cache_dir, evaluate_pose
+from graspscape.workers.sim.evaluate import Evaluator, default_cache_dir
 from graspscape.workers.sim.objects import prepare_object
 from scipy.stats import spearmanr
 
@@ -32,16 +33,17 @@ POSES = {
 }
 
 
-def mu_values(metric: MetricSettings, length_factor: float = 1.0) -> list[float]:
+def mu_values(metric: MetricSettings, length_factor: float = 1.0,
+              world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> list[float]:
     values = []
     for name, poses in POSES.items():
-        obj = ObjectSpec(name=name)
+        prepared = prepare_object(ObjectSpec(name=name), default_cache_dir() / "objects")
         if length_factor != 1.0:
-            prepared = prepare_object(obj, default_cache_dir() / "objects")
             radius = math.sqrt(sum(prepared.inertia_diag) / 3 / prepared.mass_kg)
             metric = metric.model_copy(update={"characteristic_length": length_factor * radius})
-        settings = SimSettings(metric=metric)
-        values += [evaluate_pose(pose, obj=obj, settings=settings).mu_s for pose in poses]
+        with Evaluator(prepared, load_gripper("robotiq_3f"), SimSettings(metric=metric),
+                       work_dir=default_cache_dir(), world_offset=world_offset) as evaluator:
+            values += [evaluator.evaluate(pose).mu_s for pose in poses]
     return values
 
 
@@ -60,11 +62,12 @@ def main() -> None:
                                  "mean_mu_s_default": float(reference[held].mean())}
     variants_values = {name: mu_values(metric) for name, metric in variants.items()}
     variants_values["length"] = mu_values(base, length_factor=0.5)  # half the radius of gyration
+    variants_values["moved_1um"] = mu_values(base, world_offset=(1e-6, 0.0, 0.0))
     for name, values in variants_values.items():
         values = np.array(values)
-        figures[f"mean_abs_mu_s_change_halved_{name}"] = float(
-            np.abs(values - reference)[held].mean())
-        figures[f"rank_correlation_halved_{name}"] = float(
+        label = name if name == "moved_1um" else f"halved_{name}"
+        figures[f"mean_abs_mu_s_change_{label}"] = float(np.abs(values - reference)[held].mean())
+        figures[f"rank_correlation_{label}"] = float(
             spearmanr(values[held], reference[held]).statistic)
     write_results("metric_stability", figures)
 

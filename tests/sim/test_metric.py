@@ -76,7 +76,7 @@ def _probe_at_start(evaluator, scene) -> float:
     pivot = scene.object_pose()[0]
     spec = evaluator.settings.trajectory
     ctx = ProbeContext(client=cid, hand_body=scene.hand.body, object_body=scene.object_body,
-                       drive=scene.drive_to,
+                       drive=scene.drive_to, contact_free_state=evaluator.pristine,
                        target=lambda step: reference_pose(spec, start_pos, start_rot, pivot,
                                                           step * scene.dt))
     metric = evaluator.settings.metric
@@ -101,3 +101,23 @@ def _quat(rotation):
 def test_characteristic_length_is_the_radius_of_gyration(sphere_evaluator):
     # A solid sphere of radius R: sqrt(I/m) = sqrt(2/5) R.
     assert sphere_evaluator.length == pytest.approx(math.sqrt(0.4) * 0.04, rel=0.05)
+
+
+def test_probes_repeat_exactly_whatever_ran_before(mug_evaluator, monkeypatch):
+    # pybullet's saved states do not hold the solver's contact cache; the probes pass through
+    # a contact-free state so that a rollout never inherits the previous rollout's contacts.
+    import graspscape.workers.sim.evaluate as evaluate_module
+
+    probe = evaluate_module.probe_instant
+    pairs: list[tuple[float, float]] = []
+
+    def twice(*args, **kwargs):
+        first = probe(*args, **kwargs)
+        second = probe(*args, **kwargs)  # starts after the first one's seven rollouts
+        pairs.append((first, second))
+        return first
+
+    monkeypatch.setattr(evaluate_module, "probe_instant", twice)
+    result = mug_evaluator.evaluate(Pose(theta=1.3, phi=2.1, r=0.02, roll=1.57))
+    assert result.viable and pairs
+    assert all(first == second for first, second in pairs)

@@ -30,6 +30,25 @@ class ProbeContext:
     object_body: int
     drive: DriveFn  # sets the drive constraint's target (gripper frame position, rotation)
     target: TargetFn  # reference gripper frame pose at a step index
+    # A saved state in which nothing touches (the evaluator's pristine one); see restore_clean.
+    contact_free_state: int | None = None
+
+
+def restore_clean(ctx: ProbeContext, state: int) -> None:
+    """Restores `state` with no contact history carried over.
+
+    pybullet's saved state holds positions and velocities, not the solver's contact cache
+    (the persistent manifolds and their warm-start impulses): a rollout from a restored state
+    starts from whatever contacts the previous rollout left, so two rollouts from the same
+    state differ by up to 0.03 m/s in the window's response (of ~0.3 m/s). Passing through a
+    contact-free state drops every manifold, so each rollout starts from the same (empty)
+    cache and repeats exactly, whatever ran before it.
+    """
+    cid = ctx.client
+    if ctx.contact_free_state is not None:
+        p.restoreState(ctx.contact_free_state, physicsClientId=cid)
+        p.performCollisionDetection(physicsClientId=cid)
+    p.restoreState(state, physicsClientId=cid)
 
 
 def _velocities(ctx: ProbeContext, point_local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,18 +62,48 @@ def _velocities(ctx: ProbeContext, point_local: np.ndarray) -> tuple[np.ndarray,
     return np.concatenate([v_point, w_b]), np.concatenate([v_o, w_o])
 
 
-def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
-                  epsilon: float, length: float, central: bool = False) -> float:
-    """Quality 1 − σ_max(G − I) at trajectory step `step` (the state is left as found)."""
+@dataclass(frozen=True)
+class ProbeAnchor:
+    """Where the responses of one instant are read: the gripper-fixed point (in the base's COM
+    frame) that coincides with the object's centre of mass at the instant, and that centre."""
+
+    point_local: np.ndarray
+    pivot: np.ndarray
+
+
+def probe_anchor(ctx: ProbeContext) -> ProbeAnchor:
+    """The anchor of the instant the simulation is at now."""
     cid = ctx.client
-    state = p.saveState(physicsClientId=cid)
     com, orn = p.getBasePositionAndOrientation(ctx.hand_body, physicsClientId=cid)
     rot0 = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
     pivot = np.array(p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)[0])
-    point_local = rot0.T @ (pivot - np.array(com))  # the gripper-fixed point at the object COM
+    return ProbeAnchor(point_local=rot0.T @ (pivot - np.array(com)), pivot=pivot)
+
+
+def response(ctx: ProbeContext, anchor: ProbeAnchor) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities now of the gripper (at the anchor point) and of the object."""
+    return _velocities(ctx, anchor.point_local)
+
+
+def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
+                  epsilon: float, length: float, central: bool = False, *,
+                  state: int | None = None) -> float:
+    """Quality 1 − σ_max(G − I) at trajectory step `step`.
+
+    `state`: a saved state of this instant to roll out from (otherwise the present state is
+    saved first). Every rollout, the unperturbed one included, starts from it through
+    `restore_clean`, so all seven see the same start; the state is restored at the end.
+    """
+    cid = ctx.client
+    own_state = state is None
+    if own_state:
+        state = p.saveState(physicsClientId=cid)
+    restore_clean(ctx, state)
+    anchor = probe_anchor(ctx)
+    pivot = anchor.pivot
 
     def rollout(axis: int | None, sign: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-        p.restoreState(state, physicsClientId=cid)
+        restore_clean(ctx, state)
         for j in range(1, window + 1):
             position, rotation = ctx.target(step + j)
             if axis is not None:
@@ -69,7 +118,7 @@ def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
                     rotation = turn @ rotation
             ctx.drive(position, rotation)
             p.stepSimulation(physicsClientId=cid)
-        return _velocities(ctx, point_local)
+        return response(ctx, anchor)
 
     try:
         span = window * dt
@@ -87,6 +136,7 @@ def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
             d_ref[:, axis] = ref / span
             d_obj[:, axis] = obj / span
     finally:
-        p.restoreState(state, physicsClientId=cid)
-        p.removeState(state, physicsClientId=cid)
+        restore_clean(ctx, state)
+        if own_state:
+            p.removeState(state, physicsClientId=cid)
     return instant_quality(sensitivity_matrix(d_ref, d_obj, length))
