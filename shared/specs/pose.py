@@ -15,6 +15,9 @@ from pydantic import BaseModel, ConfigDict, Field
 # Pose keys are rounded so that the same grid point computed along two paths (a coarse pass
 # and a refinement, or two workers) gets one key. 1e-6 rad and 1e-6 m are far below any step.
 _KEY_DIGITS = 6
+_KEY_FORMAT = "/".join([f"%.{_KEY_DIGITS}f"] * 6)
+_POLE = 10.0**-_KEY_DIGITS
+_TAU = 2 * math.pi
 
 
 class Pose(BaseModel):
@@ -29,16 +32,25 @@ class Pose(BaseModel):
 
     def key(self) -> str:
         """A stable text key: equal for poses that are the same grid point."""
-        phi = math.fmod(self.phi, 2 * math.pi)
+        phi = math.fmod(self.phi, _TAU)
         if phi < 0:
-            phi += 2 * math.pi
-        if self.theta < 10 ** -_KEY_DIGITS or math.pi - self.theta < 10 ** -_KEY_DIGITS:
+            phi += _TAU
+        theta = self.theta
+        if theta < _POLE or math.pi - theta < _POLE:
             phi = 0.0  # every azimuth is the same point at a pole
-        roll = math.fmod(self.roll, 2 * math.pi)
+        roll = math.fmod(self.roll, _TAU)
         if roll < 0:
-            roll += 2 * math.pi
-        parts = (self.theta, phi, self.r, roll, self.pitch, self.yaw)
-        return "/".join(f"{round(v, _KEY_DIGITS) + 0.0:.{_KEY_DIGITS}f}" for v in parts)
+            roll += _TAU
+        # Computed for every result on both sides of the wire: one format call, not six.
+        # `+ 0.0` turns -0.0 into 0.0.
+        return _KEY_FORMAT % (
+            round(theta, _KEY_DIGITS) + 0.0,
+            round(phi, _KEY_DIGITS) + 0.0,
+            round(self.r, _KEY_DIGITS) + 0.0,
+            round(roll, _KEY_DIGITS) + 0.0,
+            round(self.pitch, _KEY_DIGITS) + 0.0,
+            round(self.yaw, _KEY_DIGITS) + 0.0,
+        )
 
 
 def tile_poses(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import threading
 from datetime import timedelta
 
@@ -9,10 +10,12 @@ import pytest
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.service import cancel_exploration
 from graspscape.services.coordinator.store.base import utcnow
-from graspscape.services.coordinator.store.ingest import ingest_results
+from graspscape.services.coordinator.store.ingest import _PER_POSE, _values, ingest_results
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
 from graspscape.services.coordinator.store.queue import lease_tiles, requeue_expired
-from sqlalchemy import func, select
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import ContactPoint, GraspSignature
+from sqlalchemy import func, select, text
 from sqlalchemy.orm import Session, sessionmaker
 
 from tests.coordinator.helpers import fake_results
@@ -165,6 +168,73 @@ def test_a_pose_key_that_does_not_match_its_pose_is_refused_whole(session: Sessi
         ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w", results=results)
     assert pose_count(session, eid) == 0
     assert session.get(TileRow, t.tile_id).state == "leased"  # type: ignore[union-attr]
+
+
+def test_rows_read_back_as_the_orm_would_have_written_them(session: Session) -> None:
+    """The ingest writes at the driver level: every column must still come back as written
+    through the ORM (timestamps in the store's text form on SQLite, so that they compare and
+    sort with the others; JSON columns as JSON)."""
+    eid = make_exploration(session)
+    (t,) = lease_tiles(session, worker_id="w", n=1, lease_seconds=60)
+    now = (utcnow() - timedelta(minutes=5)).replace(microsecond=0)
+    results = fake_results(t.poses(), seed=3)
+    ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w", results=results,
+                   now=now)
+    session.expire_all()
+    stored = {p.pose_key: p for p in session.scalars(
+        select(PoseRow).where(PoseRow.exploration_id == eid))}
+    for result in results:
+        p = stored[result.pose_key]
+        assert (p.tile_id, p.worker_id, p.created_at) == (t.tile_id, "w", now)
+        assert (p.roll, p.pitch, p.yaw, p.effective_r, p.effort_max_nm, p.eval_time_s) == (
+            result.pose.roll, result.pose.pitch, result.pose.yaw, result.effective_r,
+            result.effort_max_nm, result.eval_time_s)
+        assert p.contacts_per_link == (result.contacts_per_link or None)
+        assert p.signature == (result.signature.model_dump(mode="json")
+                               if result.signature else None)
+        assert p.grasp == (result.grasp.model_dump(mode="json") if result.grasp else None)
+    # In the database itself: the same value as the tile's done_at, written through Core.
+    assert session.execute(text(
+        "SELECT count(*) FROM poses JOIN tiles ON tiles.id = poses.tile_id "
+        "WHERE poses.exploration_id = :eid AND poses.created_at = tiles.done_at"),
+        {"eid": eid}).scalar() == len(results)
+    since = now - timedelta(seconds=1)
+    assert session.scalar(select(func.count()).select_from(PoseRow).where(
+        PoseRow.exploration_id == eid, PoseRow.created_at > since)) == len(results)
+    assert session.scalar(select(func.count()).select_from(PoseRow).where(
+        PoseRow.exploration_id == eid, PoseRow.created_at > now)) == 0
+
+
+def test_a_batch_over_several_statements_is_stored_and_counted_once(
+    session: Session, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # SQLite takes a batch in statements of as many rows as it takes parameters: 2 rows here.
+    monkeypatch.setattr(session.get_bind().dialect, "insertmanyvalues_max_parameters", 41)
+    eid = make_exploration(session)
+    t = max(lease_tiles(session, worker_id="w", n=3, lease_seconds=60),
+            key=lambda tile: len(tile.poses()))
+    results = fake_results(t.poses(), seed=5)
+    assert len(results) > 4
+    first = ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w",
+                           results=results[:3], final=False)
+    report = ingest_results(session, tile_id=t.tile_id, lease_epoch=1, worker_id="w",
+                            results=results)
+    assert (first.inserted, report.inserted, report.duplicates) == (3, len(results) - 3, 3)
+    row = exploration(session, eid)
+    assert row.poses_done == len(results) == pose_count(session, eid)
+    assert row.viable_count == sum(r.viable for r in results)
+
+
+def test_a_non_finite_value_in_a_json_column_is_kept_as_json_dumps_writes_it() -> None:
+    result = fake_results([Pose(theta=1.0, phi=0.5, r=0.01)], seed=1)[0]
+    signature = GraspSignature(links_in_contact=("palm",), joint_angles={"j": float("nan")},
+                               contacts=(ContactPoint(link="palm", normal_force_n=float("inf"),
+                                                      position_object=(0.0, 0.1, 0.2)),))
+    values = dict(zip((name for name, _ in _PER_POSE),
+                      _values(result.model_copy(update={"signature": signature})), strict=True))
+    assert values["signature"] == json.dumps(signature.model_dump(mode="json"))
+    assert "NaN" in values["signature"] and "Infinity" in values["signature"]
+    assert json.loads(values["grasp"]) == result.grasp.model_dump(mode="json")
 
 
 def test_an_unknown_tile_is_refused(session: Session) -> None:

@@ -14,9 +14,12 @@ import signal
 import socket
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import zenoh
+from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
     ContactPoint,
@@ -55,6 +58,9 @@ class WorkerProcess:
         self.session: zenoh.Session | None = None
         self.tiles_done = 0
         self.poses_done = 0
+        # The batch sent last, whose acknowledgement is not read yet: the next tile is
+        # evaluated meanwhile (see _send).
+        self.pending: _Delivery | None = None
 
     # -- lifecycle -----------------------------------------------------------------------
 
@@ -75,9 +81,11 @@ class WorkerProcess:
         self.objects = ObjectCache(self.session, cache_dir, self.config.query_timeout_s)
         self.cache_dir = cache_dir
         log.info("%s connected to %s", self.worker_id, self.config.connect)
+        freeze_startup_heap()
         try:
             self._loop()
         finally:
+            self._settle()
             token.undeclare()
             self.session.close()
             log.info("%s stopped after %d tiles, %d poses", self.worker_id, self.tiles_done,
@@ -107,6 +115,7 @@ class WorkerProcess:
         while not self.stop.is_set():
             tiles = self._lease()
             if not tiles:
+                self._settle()
                 self.stop.wait(idle.next())  # no work, or no coordinator: ask again later
                 continue
             idle.reset()
@@ -124,6 +133,8 @@ class WorkerProcess:
             worker_id=self.worker_id,
             host=socket.gethostname()[:255],
             capacity=self.config.tiles_per_request,
+            # The tile whose batch is still on its way is not lost: it stays leased.
+            holding=[self.pending.batch.tile_id] if self.pending is not None else [],
         )
         tiles: list[TileLease] = []
         try:
@@ -175,7 +186,7 @@ class WorkerProcess:
                                       error=f"{type(exc).__name__}: {exc}"))
             return
         final = len(results) == len(poses)
-        self._deliver(self._batch(tile, results, final=final, release=not final))
+        self._send(self._batch(tile, results, final=final, release=not final))
         self.poses_done += len(results)
         self.tiles_done += final
 
@@ -195,17 +206,44 @@ class WorkerProcess:
 
     def _deliver(self, batch: ResultBatch) -> Ack | None:
         """Send a batch until the coordinator acknowledges it (the ack means committed)."""
-        payload = encode(batch)
+        self._settle()
+        return self._await(self._query(batch))
+
+    def _send(self, batch: ResultBatch) -> None:
+        """Send a batch and go on: its acknowledgement is read after the next tile, so the
+        coordinator commits one batch while this process evaluates the next. One batch at
+        most is in flight; until its ack, it is retried as _deliver does."""
+        self._settle()
+        self.pending = self._query(batch)
+
+    def _settle(self) -> None:
+        """Wait for the batch in flight, if any, to be acknowledged (or given up)."""
+        pending, self.pending = self.pending, None
+        if pending is not None:
+            self._await(pending)
+
+    def _query(self, batch: ResultBatch, payload: bytes | None = None) -> _Delivery:
+        payload = payload if payload is not None else encode(batch)
         key = keys.results_key(batch.tile_id, batch.lease_epoch)
+        try:
+            replies = self.session.get(
+                key,
+                payload=payload,
+                consolidation=zenoh.ConsolidationMode.NONE,
+                timeout=self.config.query_timeout_s,
+            )
+        except zenoh.ZError as exc:
+            log.warning("%s: sending tile %d failed: %s", self.worker_id, batch.tile_id, exc)
+            replies = None
+        return _Delivery(batch, payload, replies)
+
+    def _await(self, delivery: _Delivery) -> Ack | None:
+        """Read a sent batch's answer; send it again until the coordinator acknowledges it."""
+        batch = delivery.batch
         backoff = Backoff(self.config.backoff_min_s, self.config.backoff_max_s)
         while True:
             try:
-                for reply in self.session.get(
-                    key,
-                    payload=payload,
-                    consolidation=zenoh.ConsolidationMode.NONE,
-                    timeout=self.config.query_timeout_s,
-                ):
+                for reply in delivery.replies if delivery.replies is not None else ():
                     if reply.ok is not None:
                         message = decode_as(reply.ok.payload.to_bytes(), Ack)
                     else:
@@ -226,6 +264,16 @@ class WorkerProcess:
                           "again by the coordinator", self.worker_id, batch.tile_id)
                 return None
             time.sleep(backoff.next())
+            delivery = self._query(batch, delivery.payload)
+
+
+@dataclass
+class _Delivery:
+    """A result batch sent to the coordinator, and the replies to read."""
+
+    batch: ResultBatch
+    payload: bytes
+    replies: Any  # zenoh's reply handler; None when the query could not be sent
 
 
 def _instant_result(pose: Pose) -> PoseResult:

@@ -28,6 +28,7 @@ from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.settings import Settings
 from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.queue import fail_tile, lease_tiles
+from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.wire import keys
 from graspscape.shared.wire.codec import decode_as, encode, error
 from graspscape.shared.wire.messages import (
@@ -137,6 +138,7 @@ class Dispatcher:
         sweeper = threading.Thread(target=self._orphan_sweep, name="dispatch-orphans", daemon=True)
         sweeper.start()
         self._threads.append(sweeper)
+        freeze_startup_heap()
         log.info(
             "dispatch up: zenoh %s, listen %s, connect %s",
             self.zs.mode,

@@ -45,7 +45,7 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import PoseResult
-from sqlalchemy import func, insert, select, update
+from sqlalchemy import bindparam, func, insert, select, update
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.adaptive")
@@ -291,6 +291,28 @@ def _store_inferred(session: Session, exploration_id: int, inferences: list[Infe
 
 
 # --- the hook --------------------------------------------------------------------------------
+_STATE = select(ExplorationRow.status, ExplorationRow.created_at).where(
+    ExplorationRow.id == bindparam("id")
+)
+_SPEC = select(ExplorationRow.spec).where(ExplorationRow.id == bindparam("id"))
+# Specs never change after submission: the hook reads one per exploration, not per batch (a
+# spec is a JSON document to load and validate). Keyed with the creation time, as
+# dispatch.catalog is: SQLite may give a deleted exploration's id to a new one.
+_SPECS_AT: dict[tuple[int, datetime], ExplorationSpec] = {}
+_MAX_SPECS_AT = 256
+
+
+def _spec_at(session: Session, exploration_id: int, created_at: datetime) -> ExplorationSpec:
+    key = (exploration_id, created_at)
+    spec = _SPECS_AT.get(key)
+    if spec is None:
+        spec = spec_of(session.scalar(_SPEC, {"id": exploration_id}), exploration_id)
+        if len(_SPECS_AT) >= _MAX_SPECS_AT:
+            _SPECS_AT.clear()
+        _SPECS_AT[key] = spec
+    return spec
+
+
 def after_ingest(
     session: Session,
     *,
@@ -301,13 +323,10 @@ def after_ingest(
     target_poses: int = 100,
 ) -> None:
     """React to a stored batch: refine borders, apply shortcuts, search, finish manifolds."""
-    row = session.execute(
-        select(ExplorationRow.spec, ExplorationRow.status)
-        .where(ExplorationRow.id == exploration_id)
-    ).one_or_none()
+    row = session.connection().execute(_STATE, {"id": exploration_id}).one_or_none()
     if row is None or row.status == ExplorationStatus.CANCELLED:
         return
-    spec = spec_of(row.spec, exploration_id)
+    spec = _spec_at(session, exploration_id, row.created_at)
     lattice = lattice_of(spec)
     if lattice.depth == 0 and not (spec.shortcuts.normal_reuse or spec.shortcuts.symmetry):
         # Coarse pass only, no shortcuts: no batch can lead to more work, and the manifolds

@@ -13,12 +13,12 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from datetime import datetime
+from functools import lru_cache
 from typing import Any
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.adaptive import after_ingest
 from graspscape.services.coordinator.store.base import utcnow
-from graspscape.services.coordinator.store.dialect import insert_for, is_postgres
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
     PoseRow,
@@ -28,7 +28,8 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.services.coordinator.store.queue import finish_complete_explorations
 from graspscape.shared.specs.results import PoseResult
 from pydantic import BaseModel
-from sqlalchemy import select, update
+from pydantic_core import to_json
+from sqlalchemy import bindparam, select, update
 from sqlalchemy.orm import Session
 
 
@@ -39,32 +40,39 @@ class IngestReport(BaseModel):
     tile_moved: bool  # this batch moved the tile leased → done
 
 
-def _row(
-    result: PoseResult, *, exploration_id: int, tile_id: int, worker_id: str, now: datetime
-) -> dict[str, Any]:
+def _json_text(model: BaseModel | None) -> str | None:
+    """A JSON column's text, serialized by pydantic (several times faster than json.dumps of
+    model_dump). Its fields are never null, so a null in the text is a non-finite float that
+    pydantic wrote as null: json.dumps keeps it as NaN/Infinity, as the column always did."""
+    if model is None:
+        return None
+    text = model.model_dump_json()
+    if "null" in text:
+        return json.dumps(model.model_dump(mode="json"))
+    return text
+
+
+def _values(result: PoseResult) -> tuple[Any, ...]:
+    """The per-pose columns of one result, in _PER_POSE order, as the driver takes them."""
     pose = result.pose
-    return {
-        "exploration_id": exploration_id,
-        "tile_id": tile_id,
-        "pose_key": result.pose_key,
-        "theta": pose.theta,
-        "phi": pose.phi,
-        "r": pose.r,
-        "roll": pose.roll,
-        "pitch": pose.pitch,
-        "yaw": pose.yaw,
-        "outcome": result.outcome.value,
-        "viable": result.viable,
-        "mu_s": result.mu_s,
-        "effective_r": result.effective_r,
-        "effort_max_nm": result.effort_max_nm,
-        "contacts_per_link": result.contacts_per_link or None,
-        "signature": result.signature.model_dump(mode="json") if result.signature else None,
-        "grasp": result.grasp.model_dump(mode="json") if result.grasp else None,
-        "worker_id": worker_id,
-        "eval_time_s": result.eval_time_s,
-        "created_at": now,
-    }
+    return (
+        result.pose_key,
+        pose.theta,
+        pose.phi,
+        pose.r,
+        pose.roll,
+        pose.pitch,
+        pose.yaw,
+        result.outcome.value,
+        result.viable,
+        result.mu_s,
+        result.effective_r,
+        result.effort_max_nm,
+        to_json(result.contacts_per_link).decode() if result.contacts_per_link else None,
+        _json_text(result.signature),
+        _json_text(result.grasp),
+        result.eval_time_s,
+    )
 
 
 _PER_POSE = (
@@ -87,9 +95,10 @@ _PER_POSE = (
 )
 _JSON_COLUMNS = ("contacts_per_link", "signature", "grasp")
 _PER_BATCH = ("exploration_id", "tile_id", "worker_id", "created_at")
+_CONFLICT = "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"
 _PG_INSERT = (
     "INSERT INTO poses ({columns}) SELECT {batch}, {select} FROM unnest({arrays}) AS u({names}) "
-    "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"
+    "{conflict}"
 ).format(
     columns=", ".join(_PER_BATCH + tuple(name for name, _ in _PER_POSE)),
     batch=", ".join(f"%({name})s" for name in _PER_BATCH),
@@ -99,31 +108,89 @@ _PG_INSERT = (
     # %(...)b: binary parameters, which psycopg dumps without escaping each array element.
     arrays=", ".join(f"%({name})b::{sql_type}[]" for name, sql_type in _PER_POSE),
     names=", ".join(name for name, _ in _PER_POSE),
+    conflict=_CONFLICT,
 )
+_N_COLUMNS = len(_PER_BATCH) + len(_PER_POSE)
 
 
-def _insert_new(session: Session, rows: list[dict[str, Any]]) -> list[bool]:
-    """Insert the rows not stored yet; return the `viable` flag of each row inserted."""
-    if is_postgres(session):
+@lru_cache(maxsize=32)
+def _sqlite_insert(n_rows: int) -> str:
+    """SQLite: one multi-row VALUES statement (its text is cached by row count, its prepared
+    form by the driver)."""
+    row = "(" + ", ".join("?" * _N_COLUMNS) + ")"
+    columns = ", ".join(_PER_BATCH + tuple(name for name, _ in _PER_POSE))
+    return f"INSERT INTO poses ({columns}) VALUES {', '.join([row] * n_rows)} {_CONFLICT}"
+
+
+def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, ...]]
+                ) -> list[bool]:
+    """Insert the rows not stored yet; return the `viable` flag of each row inserted.
+
+    `batch`: the _PER_BATCH values, the same for every row; `rows`: _values() of each result.
+    Both backends get one driver-level statement per batch: SQLAlchemy's per-row parameter
+    processing (JSON, datetime) took more time than the database itself.
+    """
+    connection = session.connection()
+    dialect = connection.dialect
+    # The timestamp as the ORM would bind it (UTC; on SQLite the store's text form).
+    created_at = PoseRow.__table__.c.created_at.type.dialect_impl(dialect).bind_processor(dialect)
+    if created_at is not None:
+        batch = (*batch[:3], created_at(batch[3]))
+    if dialect.name == "postgresql":
         # One short statement with a column array each: psycopg parses and prepares it once.
         # A multi-row VALUES statement has thousands of placeholders that psycopg re-parses
         # on every batch, which took half of the ingest time.
-        first = rows[0]
-        params: dict[str, Any] = {name: first[name] for name in _PER_BATCH}
-        for name, _ in _PER_POSE:
-            column = [row[name] for row in rows]
-            if name in _JSON_COLUMNS:
-                column = [None if v is None else json.dumps(v) for v in column]
-            params[name] = column
-        result = session.connection().exec_driver_sql(_PG_INSERT, params)
+        params: dict[str, Any] = dict(zip(_PER_BATCH, batch, strict=True))
+        for (name, _), column in zip(_PER_POSE, zip(*rows, strict=True), strict=True):
+            params[name] = list(column)
+        result = connection.exec_driver_sql(_PG_INSERT, params)
         return [bool(v) for (v,) in result]
-    table = PoseRow.__table__
-    stmt = (
-        insert_for(session, table)
-        .on_conflict_do_nothing(index_elements=[table.c.exploration_id, table.c.pose_key])
-        .returning(table.c.viable)
+    if dialect.name != "sqlite":
+        raise RuntimeError(f"unsupported database dialect {dialect.name!r}")
+    # As many rows per statement as the SQLite build takes parameters (32,766, or 999 before
+    # 3.32), as SQLAlchemy's own multi-row inserts do.
+    per_statement = max(1, dialect.insertmanyvalues_max_parameters // _N_COLUMNS)
+    viable: list[bool] = []
+    for start in range(0, len(rows), per_statement):
+        chunk = rows[start : start + per_statement]
+        params_flat: list[Any] = []
+        for row in chunk:
+            params_flat += batch
+            params_flat += row
+        result = connection.exec_driver_sql(_sqlite_insert(len(chunk)), tuple(params_flat))
+        viable += [bool(v) for (v,) in result]
+    return viable
+
+
+# The statements of every batch, built once (building them took longer than running them).
+_TILE = select(TileRow.exploration_id, TileRow.state, TileRow.lease_epoch).where(
+    TileRow.id == bindparam("tile_id")
+)
+_COUNT = (
+    update(ExplorationRow)
+    .where(ExplorationRow.id == bindparam("exploration_id"))
+    .values(
+        poses_done=ExplorationRow.poses_done + bindparam("inserted"),
+        viable_count=ExplorationRow.viable_count + bindparam("viable"),
+        updated_at=bindparam("now"),
     )
-    return [bool(v) for (v,) in session.connection().execute(stmt, rows)]
+)
+_MOVABLE = (TileState.LEASED, TileState.QUEUED)
+_FINISH_TILE = (
+    update(TileRow)
+    .where(
+        TileRow.id == bindparam("tile_id"),
+        TileRow.state.in_(_MOVABLE),
+        TileRow.lease_epoch == bindparam("epoch"),
+    )
+    .values(
+        state=TileState.DONE,
+        done_at=bindparam("now"),
+        updated_at=bindparam("now"),
+        lease_owner=None,
+        lease_expires_at=None,
+    )
+)
 
 
 def ingest_results(
@@ -138,15 +205,13 @@ def ingest_results(
 ) -> IngestReport:
     """Store a batch of results of one tile; with `final`, the tile is finished by it."""
     now = now or utcnow()
-    tile = session.execute(
-        select(TileRow.exploration_id, TileRow.state, TileRow.lease_epoch).where(
-            TileRow.id == tile_id
-        )
-    ).one_or_none()
+    session.flush()  # what the session holds goes first, as autoflush would do it
+    connection = session.connection()
+    tile = connection.execute(_TILE, {"tile_id": tile_id}).one_or_none()
     if tile is None:
         session.rollback()
         raise NotFound(f"tile {tile_id} does not exist (was its exploration deleted?)")
-    rows: dict[str, dict[str, Any]] = {}
+    rows: dict[str, tuple[Any, ...]] = {}
     for result in results:
         key = result.pose.key()
         if result.pose_key != key:
@@ -154,29 +219,20 @@ def ingest_results(
             raise InvalidInput(
                 f"result pose_key {result.pose_key!r} does not match its pose (key {key!r})"
             )
-        rows[key] = _row(
-            result,
-            exploration_id=tile.exploration_id,
-            tile_id=tile_id,
-            worker_id=worker_id,
-            now=now,
-        )
+        rows[key] = _values(result)
 
     inserted = viable = 0
     if rows:
-        returned = _insert_new(session, list(rows.values()))
+        returned = _insert_new(
+            session, (tile.exploration_id, tile_id, worker_id, now), list(rows.values())
+        )
         inserted = len(returned)
         viable = sum(1 for v in returned if v)
         if inserted:
-            session.execute(
-                update(ExplorationRow)
-                .where(ExplorationRow.id == tile.exploration_id)
-                .values(
-                    poses_done=ExplorationRow.poses_done + inserted,
-                    viable_count=ExplorationRow.viable_count + viable,
-                    updated_at=now,
-                )
-                .execution_options(synchronize_session=False)
+            connection.execute(
+                _COUNT,
+                {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
+                 "now": now},
             )
 
     moved = False
@@ -184,27 +240,11 @@ def ingest_results(
     # The lease under which the results were computed is the tile's current one when the
     # epochs match. Its tile may be `queued` if the lease ran out but nobody re-leased it
     # yet: the complete result then still finishes it, sparing a second evaluation.
-    movable = (TileState.LEASED, TileState.QUEUED)
-    if final and tile.state in movable and tile.lease_epoch == lease_epoch:
-        moved = (
-            session.execute(
-                update(TileRow)
-                .where(
-                    TileRow.id == tile_id,
-                    TileRow.state.in_(movable),
-                    TileRow.lease_epoch == lease_epoch,
-                )
-                .values(
-                    state=TileState.DONE,
-                    done_at=now,
-                    updated_at=now,
-                    lease_owner=None,
-                    lease_expires_at=None,
-                )
-                .execution_options(synchronize_session=False)
-            ).rowcount  # type: ignore[attr-defined]
-            == 1
+    if final and tile.state in _MOVABLE and tile.lease_epoch == lease_epoch:
+        done = connection.execute(
+            _FINISH_TILE, {"tile_id": tile_id, "epoch": lease_epoch, "now": now}
         )
+        moved = done.rowcount == 1
         if moved:
             state = TileState.DONE
             finish_complete_explorations(session, [tile.exploration_id], now=now)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from datetime import datetime, timedelta
-from typing import Any
 
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.store.base import utcnow
@@ -27,7 +26,7 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.services.coordinator.store.workers import touch_worker
 from graspscape.shared.specs.pose import Pose, tile_poses
 from pydantic import BaseModel, ConfigDict
-from sqlalchemy import ColumnElement, String, case, cast, literal, select, update
+from sqlalchemy import ColumnElement, String, bindparam, case, cast, literal, select, update
 from sqlalchemy.orm import Session
 
 
@@ -271,26 +270,30 @@ def requeue_expired(
     return RequeueReport(requeued=requeued, failed=failed)
 
 
+# Tiles that still have work ahead. `state IN` these (not `NOT IN` the terminal ones) looks
+# the exploration's open tiles up in the (state, exploration_id, ...) index instead of reading
+# every tile of the exploration, each time a tile finishes.
+_OPEN_TILE_STATES = tuple(s for s in TileState if s not in TERMINAL_TILE_STATES)
+_FINISH_EXPLORATIONS = (
+    update(ExplorationRow)
+    .where(
+        ExplorationRow.id.in_(bindparam("ids", expanding=True)),
+        ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
+        ~select(TileRow.id)
+        .where(TileRow.exploration_id == ExplorationRow.id)
+        .where(TileRow.state.in_(_OPEN_TILE_STATES))
+        .exists(),
+    )
+    .values(status=ExplorationStatus.DONE, finished_at=bindparam("now"),
+            updated_at=bindparam("now"))
+)
+
+
 def finish_complete_explorations(
     session: Session, exploration_ids: Iterable[int], *, now: datetime
 ) -> None:
     """Mark running explorations done once none of their tiles is queued or leased."""
-    ids = set(exploration_ids)
+    ids = sorted(set(exploration_ids))
     if not ids:
         return
-    open_tiles: Any = (
-        select(TileRow.id)
-        .where(TileRow.exploration_id == ExplorationRow.id)
-        .where(TileRow.state.not_in(TERMINAL_TILE_STATES))
-        .exists()
-    )
-    session.execute(
-        update(ExplorationRow)
-        .where(
-            ExplorationRow.id.in_(ids),
-            ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
-            ~open_tiles,
-        )
-        .values(status=ExplorationStatus.DONE, finished_at=now, updated_at=now)
-        .execution_options(synchronize_session=False)
-    )
+    session.connection().execute(_FINISH_EXPLORATIONS, {"ids": ids, "now": now})
