@@ -129,6 +129,7 @@ def test_partial_batches_do_not_finish_the_tile(session: Session) -> None:
 def test_the_last_tile_finishes_the_exploration(session: Session) -> None:
     eid = make_exploration(session, dtheta=1.5, target=10_000)
     leased = lease_tiles(session, worker_id="w", n=100, lease_seconds=60)
+    now = utcnow().replace(microsecond=0)
     for t in leased:
         assert exploration(session, eid).status == "running"
         ingest_results(
@@ -137,9 +138,10 @@ def test_the_last_tile_finishes_the_exploration(session: Session) -> None:
             lease_epoch=t.lease_epoch,
             worker_id="w",
             results=fake_results(t.poses(), seed=t.tile_id),
+            now=now,
         )
     row = exploration(session, eid)
-    assert row.status == "done" and row.finished_at is not None
+    assert row.status == "done" and row.finished_at == now
     assert row.poses_done == row.poses_total
 
 

@@ -101,7 +101,7 @@ class Worker:
     """`graspscape worker` (a supervisor with N simulation processes) as a child process."""
 
     def __init__(self, endpoint: str, procs: int, name: str, cache_dir: Path,
-                 instant: bool = False) -> None:
+                 instant: bool = False, tiles_per_request: int = 1) -> None:
         self.log_path = cache_dir.parent / f"worker-{name}.log"
         self.log = open(self.log_path, "wb")  # noqa: SIM115
         args = [sys.executable, "-m", "graspscape.shared.cli", "worker", "--connect", endpoint,
@@ -109,6 +109,8 @@ class Worker:
                 "--log-level", "info"]
         if instant:
             args.append("--instant")
+        if tiles_per_request != 1:
+            args += ["--tiles-per-request", str(tiles_per_request)]
         self.process = subprocess.Popen(args, cwd=REPO, stdout=self.log,
                                         stderr=subprocess.STDOUT)
 

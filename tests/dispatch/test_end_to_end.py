@@ -63,6 +63,29 @@ def test_two_workers_with_two_processes_each_finish(
     assert {o.split("-")[0] for o in owners} == {"w0", "w1"}
 
 
+def test_instant_workers_lease_each_tile_once_while_batches_are_in_flight(
+    any_url: str, any_sessions: sessionmaker[Session], tmp_path: Path
+) -> None:
+    # A process sends a batch and evaluates its next tile before reading the ack, and asks
+    # for more tiles with that batch still in flight: the tile it names as held must stay
+    # leased to it (not be handed back as a lost lease reply and leased again).
+    coordinator = Coordinator(any_url, tmp_path, free_port())
+    exploration_id = submit(any_sessions, dtheta_deg=15.0, tile_poses=6)
+    worker = Worker(coordinator.endpoint, 2, "quick", tmp_path / "cache", instant=True,
+                    tiles_per_request=3)
+    try:
+        _finish(any_sessions, exploration_id, 120, worker)
+    finally:
+        code = worker.stop()
+        coordinator.stop()
+    assert code == 0
+    assert_complete(any_sessions, exploration_id)
+    with any_sessions() as session:
+        tiles = session.execute(select(TileRow.lease_epoch, TileRow.attempts)).all()
+    assert len(tiles) > 20
+    assert set(tiles) == {(1, 1)}
+
+
 def _leased(sessions: sessionmaker[Session]) -> list[tuple[int, str, int]]:
     with sessions() as session:
         return [tuple(r) for r in session.execute(

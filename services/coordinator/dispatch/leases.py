@@ -15,7 +15,7 @@ from datetime import datetime
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import TileRow, TileState
 from graspscape.services.coordinator.store.queue import held_under, requeue_where
-from sqlalchemy import ColumnElement, literal, select, update
+from sqlalchemy import ColumnElement, bindparam, literal, select, update
 from sqlalchemy.orm import Session
 
 
@@ -40,6 +40,11 @@ def release_tile(
     return result.rowcount == 1  # type: ignore[attr-defined]
 
 
+_HELD = select(TileRow.id).where(
+    TileRow.state == TileState.LEASED, TileRow.lease_owner == bindparam("owner")
+)
+
+
 def release_unheld(
     session: Session, *, worker_id: str, holding: Collection[int], now: datetime | None = None
 ) -> int:
@@ -47,8 +52,7 @@ def release_unheld(
     now = now or utcnow()
     # Almost always nothing to release: a read first keeps the common case free of a write
     # transaction (SQLite has a single writer).
-    held = set(session.scalars(select(TileRow.id).where(
-        TileRow.state == TileState.LEASED, TileRow.lease_owner == worker_id)))
+    held = set(session.scalars(_HELD, {"owner": worker_id}))
     if not held - set(holding):
         session.rollback()  # end the read transaction
         return 0

@@ -321,12 +321,21 @@ def after_ingest(
     tile_moved: bool,
     now: datetime,
     target_poses: int = 100,
+    status: str | None = None,
+    created_at: datetime | None = None,
 ) -> None:
-    """React to a stored batch: refine borders, apply shortcuts, search, finish manifolds."""
-    row = session.connection().execute(_STATE, {"id": exploration_id}).one_or_none()
-    if row is None or row.status == ExplorationStatus.CANCELLED:
+    """React to a stored batch: refine borders, apply shortcuts, search, finish manifolds.
+
+    `status`, `created_at`: the exploration's, when the caller has read them in this
+    transaction already (the ingest's counter update returns them)."""
+    if status is None or created_at is None:
+        row = session.connection().execute(_STATE, {"id": exploration_id}).one_or_none()
+        if row is None:
+            return
+        status, created_at = row.status, row.created_at
+    if status == ExplorationStatus.CANCELLED:
         return
-    spec = _spec_at(session, exploration_id, row.created_at)
+    spec = _spec_at(session, exploration_id, created_at)
     lattice = lattice_of(spec)
     if lattice.depth == 0 and not (spec.shortcuts.normal_reuse or spec.shortcuts.symmetry):
         # Coarse pass only, no shortcuts: no batch can lead to more work, and the manifolds

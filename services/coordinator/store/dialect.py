@@ -10,7 +10,10 @@ from sqlalchemy.orm import Session
 
 
 def insert_for(session: Session, table: Any) -> Any:
-    name = session.get_bind().dialect.name
+    return insert_for_dialect(session.get_bind().dialect.name, table)
+
+
+def insert_for_dialect(name: str, table: Any) -> Any:
     if name == "postgresql":
         return postgresql.insert(table)
     if name == "sqlite":

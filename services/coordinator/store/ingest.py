@@ -18,18 +18,19 @@ from typing import Any
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.adaptive import after_ingest
-from graspscape.services.coordinator.store.base import utcnow
+from graspscape.services.coordinator.store.base import UTCDateTime, utcnow
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
+    ExplorationStatus,
     PoseRow,
     TileRow,
     TileState,
 )
-from graspscape.services.coordinator.store.queue import finish_complete_explorations
+from graspscape.services.coordinator.store.queue import EXPLORATION_COMPLETE
 from graspscape.shared.specs.results import PoseResult
 from pydantic import BaseModel
 from pydantic_core import to_json
-from sqlalchemy import bindparam, select, update
+from sqlalchemy import bindparam, case, select, update
 from sqlalchemy.orm import Session
 
 
@@ -93,21 +94,23 @@ _PER_POSE = (
     ("grasp", "text"),
     ("eval_time_s", "float8"),
 )
-_JSON_COLUMNS = ("contacts_per_link", "signature", "grasp")
 _PER_BATCH = ("exploration_id", "tile_id", "worker_id", "created_at")
 _CONFLICT = "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"
+# PostgreSQL: the batch's rows as one JSON array of arrays, unpacked by the server. One
+# short statement that psycopg prepares once; the JSON is written by pydantic in one call,
+# where dumping a column array each (or a multi-row VALUES with thousands of placeholders)
+# cost more client time than the insert took the server. Floats travel as their shortest
+# round-trip text (non-finite ones as "NaN"/"Infinity" strings, which float8 reads).
+_PG_CASTS = {"varchar": "", "float8": "::float8", "boolean": "::boolean", "text": "::json"}
 _PG_INSERT = (
-    "INSERT INTO poses ({columns}) SELECT {batch}, {select} FROM unnest({arrays}) AS u({names}) "
-    "{conflict}"
+    "INSERT INTO poses ({columns}) SELECT {batch}, {select} "
+    "FROM jsonb_array_elements(%(rows)s::jsonb) AS e {conflict}"
 ).format(
     columns=", ".join(_PER_BATCH + tuple(name for name, _ in _PER_POSE)),
     batch=", ".join(f"%({name})s" for name in _PER_BATCH),
     select=", ".join(
-        f"u.{name}::json" if name in _JSON_COLUMNS else f"u.{name}" for name, _ in _PER_POSE
+        f"(e->>{i}){_PG_CASTS[sql_type]}" for i, (_, sql_type) in enumerate(_PER_POSE)
     ),
-    # %(...)b: binary parameters, which psycopg dumps without escaping each array element.
-    arrays=", ".join(f"%({name})b::{sql_type}[]" for name, sql_type in _PER_POSE),
-    names=", ".join(name for name, _ in _PER_POSE),
     conflict=_CONFLICT,
 )
 _N_COLUMNS = len(_PER_BATCH) + len(_PER_POSE)
@@ -137,12 +140,8 @@ def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, 
     if created_at is not None:
         batch = (*batch[:3], created_at(batch[3]))
     if dialect.name == "postgresql":
-        # One short statement with a column array each: psycopg parses and prepares it once.
-        # A multi-row VALUES statement has thousands of placeholders that psycopg re-parses
-        # on every batch, which took half of the ingest time.
         params: dict[str, Any] = dict(zip(_PER_BATCH, batch, strict=True))
-        for (name, _), column in zip(_PER_POSE, zip(*rows, strict=True), strict=True):
-            params[name] = list(column)
+        params["rows"] = to_json(rows, inf_nan_mode="strings").decode()
         result = connection.exec_driver_sql(_PG_INSERT, params)
         return [bool(v) for (v,) in result]
     if dialect.name != "sqlite":
@@ -166,14 +165,24 @@ def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, 
 _TILE = select(TileRow.exploration_id, TileRow.state, TileRow.lease_epoch).where(
     TileRow.id == bindparam("tile_id")
 )
+_NOW = bindparam("now", type_=UTCDateTime())
+_COUNTS = {
+    "poses_done": ExplorationRow.poses_done + bindparam("inserted"),
+    "viable_count": ExplorationRow.viable_count + bindparam("viable"),
+    "updated_at": _NOW,
+}
+# The exploration's counters, and its status and creation time for the adaptive hook, in one
+# statement; when the batch finished its tile, the exploration is finished by the same one
+# if that was its last open tile.
 _COUNT = (
     update(ExplorationRow)
     .where(ExplorationRow.id == bindparam("exploration_id"))
-    .values(
-        poses_done=ExplorationRow.poses_done + bindparam("inserted"),
-        viable_count=ExplorationRow.viable_count + bindparam("viable"),
-        updated_at=bindparam("now"),
-    )
+    .values(**_COUNTS)
+    .returning(ExplorationRow.status, ExplorationRow.created_at)
+)
+_COUNT_AND_FINISH = _COUNT.values(
+    status=case((EXPLORATION_COMPLETE, ExplorationStatus.DONE.value), else_=ExplorationRow.status),
+    finished_at=case((EXPLORATION_COMPLETE, _NOW), else_=ExplorationRow.finished_at),
 )
 _MOVABLE = (TileState.LEASED, TileState.QUEUED)
 _FINISH_TILE = (
@@ -228,12 +237,6 @@ def ingest_results(
         )
         inserted = len(returned)
         viable = sum(1 for v in returned if v)
-        if inserted:
-            connection.execute(
-                _COUNT,
-                {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
-                 "now": now},
-            )
 
     moved = False
     state = tile.state
@@ -247,13 +250,18 @@ def ingest_results(
         moved = done.rowcount == 1
         if moved:
             state = TileState.DONE
-            finish_complete_explorations(session, [tile.exploration_id], now=now)
     if inserted or moved:
+        exploration = connection.execute(
+            _COUNT_AND_FINISH if moved else _COUNT,
+            {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
+             "now": now},
+        ).one()
         # Adaptive exploration (exploration/adaptive.py): border refinement, shortcuts, local
         # search and manifolds, decided from what is stored now. In this transaction, after the
         # counter update whose row lock makes ingests of one exploration take turns.
         after_ingest(
-            session, exploration_id=tile.exploration_id, results=results, tile_moved=moved, now=now
+            session, exploration_id=tile.exploration_id, results=results, tile_moved=moved,
+            now=now, status=exploration.status, created_at=exploration.created_at,
         )
     session.commit()
     return IngestReport(

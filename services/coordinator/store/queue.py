@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from datetime import datetime, timedelta
+from typing import Any
 
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.store.base import utcnow
@@ -26,7 +27,17 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.services.coordinator.store.workers import touch_worker
 from graspscape.shared.specs.pose import Pose, tile_poses
 from pydantic import BaseModel, ConfigDict
-from sqlalchemy import ColumnElement, String, bindparam, case, cast, literal, select, update
+from sqlalchemy import (
+    ColumnElement,
+    String,
+    and_,
+    bindparam,
+    case,
+    cast,
+    literal,
+    select,
+    update,
+)
 from sqlalchemy.orm import Session
 
 
@@ -54,6 +65,53 @@ class RequeueReport(BaseModel):
     failed: int
 
 
+def _lease_statement(*, skip_locked: bool) -> Any:
+    candidates = (
+        select(TileRow.id)
+        .where(TileRow.state == TileState.QUEUED)
+        .order_by(TileRow.exploration_id, TileRow.level, TileRow.id)
+        .limit(bindparam("n"))
+    )
+    if skip_locked:
+        candidates = candidates.with_for_update(skip_locked=True)
+    return (
+        update(TileRow)
+        .where(TileRow.id.in_(candidates.scalar_subquery()))
+        .values(
+            state=TileState.LEASED,
+            lease_owner=bindparam("owner"),
+            lease_expires_at=bindparam("expires"),
+            lease_epoch=TileRow.lease_epoch + 1,
+            attempts=TileRow.attempts + 1,
+            updated_at=bindparam("now"),
+        )
+        .returning(
+            TileRow.id,
+            TileRow.exploration_id,
+            TileRow.level,
+            TileRow.index,
+            TileRow.lease_epoch,
+            TileRow.lease_expires_at,
+            TileRow.cells,
+            TileRow.r_levels,
+            TileRow.attitudes,
+        )
+    )
+
+
+# Built once: a lease is several statements, and building them took longer than running them.
+_LEASE = {False: _lease_statement(skip_locked=False), True: _lease_statement(skip_locked=True)}
+_START_EXPLORATIONS = (
+    update(ExplorationRow)
+    .where(
+        ExplorationRow.id.in_(bindparam("ids", expanding=True)),
+        ExplorationRow.status == ExplorationStatus.QUEUED,
+    )
+    .values(status=ExplorationStatus.RUNNING, started_at=bindparam("now"),
+            updated_at=bindparam("now"))
+)
+
+
 def lease_tiles(
     session: Session,
     *,
@@ -68,39 +126,13 @@ def lease_tiles(
     if n < 1:
         return []
     now = now or utcnow()
-    candidates = (
-        select(TileRow.id)
-        .where(TileRow.state == TileState.QUEUED)
-        .order_by(TileRow.exploration_id, TileRow.level, TileRow.id)
-        .limit(n)
-    )
-    if is_postgres(session):
-        candidates = candidates.with_for_update(skip_locked=True)
-    stmt = (
-        update(TileRow)
-        .where(TileRow.id.in_(candidates.scalar_subquery()))
-        .values(
-            state=TileState.LEASED,
-            lease_owner=worker_id,
-            lease_expires_at=now + timedelta(seconds=lease_seconds),
-            lease_epoch=TileRow.lease_epoch + 1,
-            attempts=TileRow.attempts + 1,
-            updated_at=now,
-        )
-        .returning(
-            TileRow.id,
-            TileRow.exploration_id,
-            TileRow.level,
-            TileRow.index,
-            TileRow.lease_epoch,
-            TileRow.lease_expires_at,
-            TileRow.cells,
-            TileRow.r_levels,
-            TileRow.attitudes,
-        )
-        .execution_options(synchronize_session=False)
-    )
-    rows = session.execute(stmt).all()
+    session.flush()  # what the session holds goes first, as autoflush would do it
+    connection = session.connection()
+    rows = connection.execute(
+        _LEASE[is_postgres(session)],
+        {"n": n, "owner": worker_id, "expires": now + timedelta(seconds=lease_seconds),
+         "now": now},
+    ).all()
     leased = sorted(
         (
             LeasedTile(
@@ -118,17 +150,9 @@ def lease_tiles(
         ),
         key=lambda t: t.tile_id,
     )
-    exploration_ids = {t.exploration_id for t in leased}
+    exploration_ids = sorted({t.exploration_id for t in leased})
     if exploration_ids:
-        session.execute(
-            update(ExplorationRow)
-            .where(
-                ExplorationRow.id.in_(exploration_ids),
-                ExplorationRow.status == ExplorationStatus.QUEUED,
-            )
-            .values(status=ExplorationStatus.RUNNING, started_at=now, updated_at=now)
-            .execution_options(synchronize_session=False)
-        )
+        connection.execute(_START_EXPLORATIONS, {"ids": exploration_ids, "now": now})
     touch_worker(session, worker_id=worker_id, host=host, capacity=capacity, now=now)
     session.commit()
     return leased
@@ -274,16 +298,18 @@ def requeue_expired(
 # the exploration's open tiles up in the (state, exploration_id, ...) index instead of reading
 # every tile of the exploration, each time a tile finishes.
 _OPEN_TILE_STATES = tuple(s for s in TileState if s not in TERMINAL_TILE_STATES)
+# An exploration row (in an UPDATE of explorations) that is complete now: still queued or
+# running, and none of its tiles open.
+EXPLORATION_COMPLETE = and_(
+    ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
+    ~select(TileRow.id)
+    .where(TileRow.exploration_id == ExplorationRow.id)
+    .where(TileRow.state.in_(_OPEN_TILE_STATES))
+    .exists(),
+)
 _FINISH_EXPLORATIONS = (
     update(ExplorationRow)
-    .where(
-        ExplorationRow.id.in_(bindparam("ids", expanding=True)),
-        ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
-        ~select(TileRow.id)
-        .where(TileRow.exploration_id == ExplorationRow.id)
-        .where(TileRow.state.in_(_OPEN_TILE_STATES))
-        .exists(),
-    )
+    .where(ExplorationRow.id.in_(bindparam("ids", expanding=True)), EXPLORATION_COMPLETE)
     .values(status=ExplorationStatus.DONE, finished_at=bindparam("now"),
             updated_at=bindparam("now"))
 )

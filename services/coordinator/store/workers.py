@@ -2,31 +2,42 @@
 
 from __future__ import annotations
 
+import functools
 from datetime import datetime
+from typing import Any
 
 from graspscape.services.coordinator.store.base import utcnow
-from graspscape.services.coordinator.store.dialect import insert_for
+from graspscape.services.coordinator.store.dialect import insert_for_dialect
 from graspscape.services.coordinator.store.models import WorkerRow
-from sqlalchemy import func, select
+from sqlalchemy import bindparam, func, select
 from sqlalchemy.orm import Session
+
+
+@functools.cache
+def _touch_statement(dialect: str) -> Any:
+    stmt = insert_for_dialect(dialect, WorkerRow.__table__).values(
+        id=bindparam("worker_id"), host=bindparam("worker_host"),
+        capacity=bindparam("worker_capacity"),
+        first_seen=bindparam("now"), last_seen=bindparam("now"),
+    )
+    return stmt.on_conflict_do_update(
+        index_elements=[WorkerRow.id],
+        set_={
+            "host": stmt.excluded.host,
+            "capacity": stmt.excluded.capacity,
+            "last_seen": stmt.excluded.last_seen,
+        },
+    )
 
 
 def touch_worker(
     session: Session, *, worker_id: str, host: str, capacity: int, now: datetime
 ) -> None:
     """Upsert a worker's last-seen time without committing (part of the caller's transaction)."""
-    stmt = insert_for(session, WorkerRow.__table__).values(
-        id=worker_id, host=host, capacity=capacity, first_seen=now, last_seen=now
-    )
-    session.execute(
-        stmt.on_conflict_do_update(
-            index_elements=[WorkerRow.id],
-            set_={
-                "host": stmt.excluded.host,
-                "capacity": stmt.excluded.capacity,
-                "last_seen": stmt.excluded.last_seen,
-            },
-        )
+    session.flush()
+    session.connection().execute(
+        _touch_statement(session.get_bind().dialect.name),
+        {"worker_id": worker_id, "worker_host": host, "worker_capacity": capacity, "now": now},
     )
 
 
