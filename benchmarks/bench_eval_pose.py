@@ -11,10 +11,14 @@ or not, and the same grasp type) on which both agree.
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
+import pybullet as p
 from graspscape.shared.specs.gripper import load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
@@ -37,15 +41,52 @@ def pose_grid() -> list[Pose]:
     return [Pose(theta=t, phi=f, r=0.02, roll=a) for t in thetas for f in phis for a in rolls]
 
 
-def run(obj: ObjectSpec, settings: SimSettings,
-        poses: list[Pose]) -> tuple[list[PoseResult], float]:
+def run(obj: ObjectSpec, settings: SimSettings, poses: list[Pose],
+        world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        ) -> tuple[list[PoseResult], float]:
     prepared = prepare_object(obj, default_cache_dir() / "objects")
     with Evaluator(prepared, load_gripper("robotiq_3f"), settings,
-                   work_dir=default_cache_dir()) as evaluator:
+                   work_dir=default_cache_dir(), world_offset=world_offset) as evaluator:
         evaluator.evaluate(poses[0])  # warm caches outside the timing
         started = time.perf_counter()
         results = [evaluator.evaluate(pose) for pose in poses]
         return results, time.perf_counter() - started
+
+
+# pybullet's own profiler (STATE_LOGGING_PROFILE_TIMINGS): the scopes one step is split into.
+STEP_SCOPES = {
+    "step": "internalSingleStepSimulation",
+    "collision": "performDiscreteCollisionDetection",
+    "solver_setup": "solveGroupCacheFriendlySetup",
+    "solver_iterations": "solveGroupCacheFriendlyIterations",
+}
+
+
+def step_split(obj: ObjectSpec, settings: SimSettings, poses: list[Pose]) -> dict[str, float]:
+    """Seconds in each STEP_SCOPES scope while evaluating `poses`, from pybullet's profiler."""
+    prepared = prepare_object(obj, default_cache_dir() / "objects")
+    with tempfile.TemporaryDirectory() as tmp, Evaluator(
+            prepared, load_gripper("robotiq_3f"), settings,
+            work_dir=default_cache_dir()) as evaluator:
+        log = p.startStateLogging(p.STATE_LOGGING_PROFILE_TIMINGS, f"{tmp}/timings",
+                                  physicsClientId=evaluator.client)
+        for pose in poses:
+            evaluator.evaluate(pose)
+        p.stopStateLogging(log, physicsClientId=evaluator.client)
+        events = json.loads(next(Path(tmp).glob("timings*")).read_text())["traceEvents"]
+    wanted = {v: k for k, v in STEP_SCOPES.items()}
+    seconds = dict.fromkeys(STEP_SCOPES, 0.0)
+    opened: dict[str, float] = {}
+    for event in events:  # names carry a running number: "solveGroup123"
+        name = event["name"]
+        scope = wanted.get(name.rstrip("0123456789"))
+        if scope is None:
+            continue
+        if event["ph"] == "B":
+            opened[name] = event["ts"]
+        elif event["ph"] == "E" and name in opened:
+            seconds[scope] += (event["ts"] - opened.pop(name)) * 1e-6
+    return seconds
 
 
 def agree(a: PoseResult, b: PoseResult) -> bool:
@@ -83,10 +124,14 @@ def main() -> None:
         update={"physics": PhysicsSettings(rate_hz=240.0, solver_iterations=50)})
     prod, prod_wall = run(obj, production, poses)
     ref, ref_wall = (prod, prod_wall) if production == reference else run(obj, reference, poses)
-    # The reference's own repeatability: the same grid at a slightly different setting.
+    # The reference's own repeatability: the same grid with the object (and so every pose)
+    # moved 1 µm in the world, which changes nothing physical but the floating-point
+    # rounding; then the same grid at a slightly different setting.
+    moved, _ = run(obj, reference, poses, world_offset=(1e-6, 0.0, 0.0))
     neighbour, _ = run(obj, with_iterations(reference, 60), poses)
     faster, faster_wall = run(obj, with_iterations(reference, 15), poses)
 
+    split = step_split(obj, reference, poses[:12])
     held = [r for r in prod if r.viable]
     phase = {k: float(np.sum([getattr(r.phases, k) for r in prod])) for k in
              ("reset_s", "approach_s", "closing_s", "trajectory_s", "sensitivity_s",
@@ -102,11 +147,13 @@ def main() -> None:
         "reference_held_share": sum(r.viable for r in ref) / len(poses),
         "production_is_reference": float(production == reference),
         "agreement_with_reference_share": float(agreement),
+        "agreement_reference_vs_moved_1um_share": share_agreeing(ref, moved),
         "agreement_reference_vs_60_iterations_share": share_agreeing(ref, neighbour),
         "agreement_15_iterations_vs_reference_share": share_agreeing(faster, ref),
         "evals_per_s_per_core_15_iterations": len(poses) / faster_wall,
         "mean_abs_mu_s_difference_where_both_held": float(
             np.mean([abs(a.mu_s - b.mu_s) for a, b in both])) if both else 0.0,
+        **{f"step_time_share_{k}": v / split["step"] for k, v in split.items() if k != "step"},
         "rate_hz": production.physics.rate_hz,
         "solver_iterations": production.physics.solver_iterations,
         **{f"{k}_total" if k.endswith("steps") else f"{k.removesuffix('_s')}_total_s": v

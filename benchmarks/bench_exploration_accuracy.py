@@ -42,6 +42,7 @@ from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.results import PoseResult
+from graspscape.workers.sim.configuration_inference import DonorPool, inferred
 from sqlalchemy import select
 
 from benchmarks._results import RESULTS_DIR, write_results
@@ -51,10 +52,12 @@ LEVELS = 1
 PROCESSES = 2
 
 
-VARIANTS = {  # shortcuts switched on, measured one at a time
+VARIANTS = {  # shortcuts switched on, measured one at a time, then all together
     "plain": {},
     "normal_reuse": {"normal_reuse": True},
+    "configuration": {"configuration_inference": True},
     "symmetry": {"symmetry": True},
+    "all": {"normal_reuse": True, "configuration_inference": True, "symmetry": True},
 }
 
 
@@ -136,6 +139,26 @@ def agreement(lattice, dense_labels, adaptive_labels, weights) -> tuple[float, f
     return float(iou), float(viable_iou)
 
 
+def with_configuration_inference(results: list[PoseResult], match) -> list[PoseResult]:
+    """What a worker with shortcut 2 returns for a tile whose plain results are `results`.
+    Synthesis is deterministic and the shortcut leaves it alone, so a pose's own synthesized
+    grasp is the plain result's; a match takes the donor's outcome, μs and effort, and costs
+    the plain evaluation's time less its trajectory and probes."""
+    pool = DonorPool(match)
+    out = []
+    for r in results:
+        donor = None if r.grasp is None or r.signature is None else pool.find(
+            r.pose, r.grasp, r.signature.links_in_contact)
+        if donor is None:
+            pool.add(r)
+            out.append(r)
+            continue
+        copy = inferred(r, donor)
+        spent = r.eval_time_s - r.phases.trajectory_s - r.phases.sensitivity_s
+        out.append(copy.model_copy(update={"eval_time_s": spent}))
+    return out
+
+
 def run_config(name: str, rolls: int, variant: str, dense: dict[str, PoseResult],
                radius) -> dict[str, float]:
     url = f"sqlite:///{tempfile.mkdtemp()}/bench.db"
@@ -146,15 +169,18 @@ def run_config(name: str, rolls: int, variant: str, dense: dict[str, PoseResult]
         spec = _spec(obj.id, rolls, variant)
         eid = create_exploration(s, spec=spec, tile_target_poses=60, max_poses=10**7).id
 
-    def evaluate(poses):
-        return [dense[p.key()] for p in poses]
+    def evaluate(poses, match=None):
+        if match is None:
+            return [dense[p.key()] for p in poses]
+        return with_configuration_inference([dense[p.key()] for p in poses], match)
 
     stats = run_local(sessions, evaluate, workers=2, seed=rolls)
     with sessions() as s:
         computed = compute_map(s, eid)
-        rows = s.execute(select(PoseRow.pose_key, PoseRow.worker_id)
+        rows = s.execute(select(PoseRow.pose_key, PoseRow.worker_id, PoseRow.inferred_from)
                          .where(PoseRow.exploration_id == eid)).all()
-    evaluated = [k for k, w in rows if not (w or "").startswith("shortcut:")]
+    evaluated = [k for k, w, _ in rows if not (w or "").startswith("shortcut:")]
+    reused = {k for k, _, source in rows if source}
     lattice = computed.lattice
     fine_pts = _fine_points(lattice)
     dense_samples = {p: Sample.from_row(_Row(dense[lattice.pose(p).key()])) for p in fine_pts}
@@ -164,13 +190,18 @@ def run_config(name: str, rolls: int, variant: str, dense: dict[str, PoseResult]
     order = np.array([index[p] for p in dense_fine.points])
     iou, viable_iou = agreement(lattice, dense_fine.labels, adaptive_fine.labels[order],
                                 dense_fine.weights)
-    cpu = sum(dense[k].eval_time_s for k in evaluated)
+    # A pose that reused a matching grasp's outcome (shortcut 2) was simulated up to its
+    # synthesized grasp: it costs that part only, and counts as an evaluation.
+    cpu = sum(dense[k].eval_time_s - (dense[k].phases.trajectory_s
+                                      + dense[k].phases.sensitivity_s if k in reused else 0.0)
+              for k in evaluated)
     dense_cpu = sum(dense[lattice.pose(p).key()].eval_time_s for p in fine_pts)
     return {
         "iou": round(iou, 4),
         "viable_iou": round(viable_iou, 4),
         "evaluations": len(evaluated),
         "inferred": len(rows) - len(evaluated),
+        "trajectory_reused": len(reused),
         "dense_poses": len(fine_pts),
         "evaluation_share": round(len(evaluated) / len(fine_pts), 4),
         "manifolds_adaptive": len(computed.map.manifolds),

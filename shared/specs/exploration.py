@@ -117,6 +117,18 @@ class RefinementSpec(BaseModel):
     )
 
 
+class ConfigurationMatch(BaseModel):
+    """When two synthesized grasps count as the same grasp configuration (shortcut 2): the
+    same links touch, and the base pose in the object frame and every joint angle agree
+    within these tolerances."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    position_m: float = Field(default=0.002, gt=0.0, le=0.05)
+    angle_rad: float = Field(default=0.02, gt=0.0, le=0.5)
+    joint_rad: float = Field(default=0.05, gt=0.0, le=0.5)
+
+
 class ShortcutsSpec(BaseModel):
     """The paper's shortcuts (section IV.B); each can be switched on alone."""
 
@@ -127,6 +139,13 @@ class ShortcutsSpec(BaseModel):
         description="along a surface normal, evaluate the r ends first and infer the levels "
         "between when both ends give the same grasp (bisect otherwise)",
     )
+    configuration_inference: bool = Field(
+        default=False,
+        description="in the coarse pass, a pose whose synthesized grasp matches one that a "
+        "pose of the same tile already took through the trajectory reuses that pose's outcome, "
+        "μs and effort instead of running trajectory and probes",
+    )
+    configuration_match: ConfigurationMatch = Field(default_factory=ConfigurationMatch)
     symmetry: bool = Field(
         default=False,
         description="detect mirror/rotation symmetries of the mesh and mirror results onto "

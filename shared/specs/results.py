@@ -70,6 +70,10 @@ class PoseResult(BaseModel):
     grasp: GraspConfiguration | None = None
     signature: GraspSignature | None = None
     eval_time_s: float = 0.0
+    inferred_from: str | None = Field(
+        default=None,
+        description="shortcut 2: the key of the pose whose outcome, μs and effort this one "
+        "reuses, its synthesized grasp matching this one's (trajectory and probes skipped)")
     phases: PhaseTimes = Field(default_factory=PhaseTimes)
     mu_g: float | None = Field(
         default=None, ge=0.0, description="grasp-matrix metric of the synthesized grasp")

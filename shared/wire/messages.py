@@ -13,6 +13,7 @@ from datetime import datetime
 from enum import StrEnum
 from typing import Annotated, Any, Literal
 
+from graspscape.shared.specs.exploration import ConfigurationMatch
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose, tile_poses
 from graspscape.shared.specs.results import PoseResult
@@ -78,6 +79,9 @@ class TileLease(_Message):
     object: ObjectRef
     gripper: str
     settings: SimSettings
+    configuration_match: ConfigurationMatch | None = Field(
+        default=None, description="shortcut 2 (see workers/sim/configuration_inference.py): "
+        "its tolerance when the exploration asks for it")
 
     def poses(self) -> list[Pose]:
         return tile_poses(self.cells, self.r_levels, self.attitudes)

@@ -33,7 +33,7 @@ def _spec(object_id: int, **shortcuts: bool) -> ExplorationSpec:
 def _explore(sessions, spec, *, workers: int, seed: int, split: int):
     calls: Counter[str] = Counter()
 
-    def evaluate(poses):
+    def evaluate(poses, match=None):
         calls.update(p.key() for p in poses)
         return [oracle_result(p) for p in poses]
 

@@ -19,9 +19,11 @@ from graspscape.services.coordinator.exploration.local_run import pybullet_evalu
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.behaviour import same_behaviour
 from graspscape.services.coordinator.manifolds.service import compute_map
+from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
 from PIL import Image
+from sqlalchemy import select
 
 CACHES: dict[str, dict] = {}
 HANDLE_X_M = 0.055  # the mug's body has a 4.5 cm radius; its handle reaches x ≈ 7 cm
@@ -200,9 +202,9 @@ def test_symmetry_shortcut_mirrors_the_cube(sessions, named_object, pool) -> Non
     calls: list[str] = []
     evaluate = _evaluator("cube", pool)
 
-    def counted(poses):
+    def counted(poses, match=None):
         calls.extend(p.key() for p in poses)
-        return evaluate(poses)
+        return evaluate(poses, match)
 
     with sessions() as s:
         eid = create_exploration(s, spec=spec, tile_target_poses=16, max_poses=10**6).id
@@ -219,3 +221,34 @@ def test_symmetry_shortcut_mirrors_the_cube(sessions, named_object, pool) -> Non
     faces = [_at(c, 90, f)[1] for f in (0, 90, 180, 270)]
     assert all(same_behaviour(faces[0], f) for f in faces[1:])
     assert "palm" in top.digits
+
+
+def test_configuration_shortcut_reuses_matching_grasps_alike_for_any_worker_count(
+        sessions, named_object, pool) -> None:
+    # Sphere approaches along one normal from 0 to 2 cm end in the same grasp: the farther
+    # poses reuse the nearer one's trajectory outcome; which ones do is fixed by the tile.
+    spec = ExplorationSpec(
+        object_id=named_object("sphere"),
+        grid={"dtheta": math.radians(60), "r_min": 0.0, "r_max": 0.02, "dr": 0.005},
+        refinement={"levels": 0},
+        shortcuts={"configuration_inference": True},
+    )
+    maps = []
+    for workers in (1, 2):
+        with sessions() as s:
+            eid = create_exploration(s, spec=spec, tile_target_poses=30, max_poses=10**6).id
+        run_local(sessions, pybullet_evaluator(ObjectSpec(name="sphere"), pool=pool),
+                  workers=workers, seed=workers)
+        with sessions() as s:
+            c = compute_map(s, eid)
+            rows = {r.pose_key: r for r in s.scalars(
+                select(PoseRow).where(PoseRow.exploration_id == eid))}
+        maps.append({k: (r.outcome, r.mu_s, r.inferred_from) for k, r in rows.items()})
+        inferred = [s for s in c.samples.values() if s.source == "shortcut:configuration"]
+        assert inferred and len(inferred) < len(c.samples)
+        for sample in inferred:
+            donor = rows[rows[sample.key].inferred_from]
+            assert donor.inferred_from is None and donor.theta == sample.theta
+            assert donor.phi == sample.phi and donor.r != sample.r
+            assert sample.viable == donor.viable and sample.mu_s == donor.mu_s
+    assert maps[0] == maps[1]

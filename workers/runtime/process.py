@@ -175,11 +175,12 @@ class WorkerProcess:
             self._deliver(self._batch(tile, [], final=False, release=True))
             self.stop.wait(self.config.backoff_max_s)
             return
+        donors = self._donors(tile)
         try:
             for pose in poses:
                 if self.stop.is_set():
                     break
-                results.append(self._evaluate(tile, obj, pose))
+                results.append(self._evaluate(tile, obj, pose, donors))
         except Exception as exc:  # the tile cannot be evaluated here: report it, go on
             log.exception("%s: tile %d failed", self.worker_id, tile.tile_id)
             self._deliver(self._batch(tile, results, final=False,
@@ -190,13 +191,21 @@ class WorkerProcess:
         self.poses_done += len(results)
         self.tiles_done += final
 
-    def _evaluate(self, tile: TileLease, obj, pose) -> PoseResult:
+    def _donors(self, tile: TileLease):
+        """Shortcut 2's pool for this tile (filled in the tile's pose order), if asked for."""
+        if self.config.instant or tile.configuration_match is None:
+            return None
+        from graspscape.workers.sim.configuration_inference import DonorPool
+
+        return DonorPool(tile.configuration_match)
+
+    def _evaluate(self, tile: TileLease, obj, pose, donors=None) -> PoseResult:
         if self.config.instant:
             return _instant_result(pose)
         from graspscape.workers.sim.evaluate import evaluate_pose
 
         return evaluate_pose(pose, obj=obj, gripper=tile.gripper, settings=tile.settings,
-                             cache_dir=self.cache_dir)
+                             cache_dir=self.cache_dir, donors=donors)
 
     def _batch(self, tile: TileLease, results: list[PoseResult], *, final: bool,
                release: bool = False, error: str | None = None) -> ResultBatch:

@@ -26,6 +26,7 @@ from graspscape.shared.specs.results import (
     PoseResult,
 )
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.configuration_inference import DonorPool
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.grasp_metrics import scene_metrics
 from graspscape.workers.sim.gripper.hand import Hand
@@ -179,9 +180,12 @@ class Evaluator:
             gap += settings.backoff_step_m
         return position, placement.rotation, self.scene.offset + placement.nearest_point, gap
 
-    def evaluate(self, pose: Pose, *, picture: Path | None = None) -> PoseResult:
+    def evaluate(self, pose: Pose, *, picture: Path | None = None,
+                 donors: DonorPool | None = None) -> PoseResult:
         """Simulates one pose. With `picture`, a PNG of the synthesized grasp (before the
-        trajectory) is written there."""
+        trajectory) is written there. With `donors` (shortcut 2), a synthesized grasp that
+        matches a donor's reuses its outcome, μs and effort; one taken through the trajectory
+        joins the donors."""
         started = time.perf_counter()
         phases = PhaseTimes()
         self._reset()
@@ -219,13 +223,21 @@ class Evaluator:
 
         if picture is not None:
             render_scene(self.client, obj_pos, picture)
+        donor = None if donors is None else donors.find(
+            pose, result["grasp"], result["signature"].links_in_contact)
+        if donor is not None:
+            result.update(mu_s=donor.mu_s, viable=donor.viable, inferred_from=donor.pose_key,
+                          effort_max_nm=donor.effort_max_nm)
+            return self._finish(started, donor.outcome, result)
         held, qualities, effort = self._run_trajectory(phases)
         result["effort_max_nm"] = effort
-        if not held:
-            return self._finish(started, Outcome.DROPPED, result)
-        result["mu_s"] = mu_s(qualities)
-        result["viable"] = True
-        return self._finish(started, Outcome.HELD, result)
+        if held:
+            result["mu_s"] = mu_s(qualities)
+            result["viable"] = True
+        finished = self._finish(started, Outcome.HELD if held else Outcome.DROPPED, result)
+        if donors is not None:
+            donors.add(finished)
+        return finished
 
     def _run_trajectory(self, phases: PhaseTimes) -> tuple[bool, list[float], float]:
         scene, hand, cid = self.scene, self.scene.hand, self.client
@@ -332,11 +344,11 @@ def _evaluator(obj: ObjectSpec, gripper: GripperSpec | str, settings: SimSetting
 
 
 def evaluate_pose(pose: Pose, *, obj: ObjectSpec, gripper: GripperSpec | str = "robotiq_3f",
-                  settings: SimSettings | None = None,
-                  cache_dir: Path | None = None) -> PoseResult:
+                  settings: SimSettings | None = None, cache_dir: Path | None = None,
+                  donors: DonorPool | None = None) -> PoseResult:
     """Evaluates one pose, reusing this process's evaluator for the same object, gripper and
-    settings (one pybullet client each, loaded once)."""
-    return _evaluator(obj, gripper, settings, cache_dir).evaluate(pose)
+    settings (one pybullet client each, loaded once). `donors`: see Evaluator.evaluate."""
+    return _evaluator(obj, gripper, settings, cache_dir).evaluate(pose, donors=donors)
 
 
 def render_pose(pose: Pose, path: Path, *, obj: ObjectSpec,

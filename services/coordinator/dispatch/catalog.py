@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from graspscape.services.coordinator.store.models import ExplorationRow, ObjectRow
-from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.exploration import ConfigurationMatch, ExplorationSpec
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.shared.wire.messages import ObjectRef
 from sqlalchemy import select
@@ -26,6 +26,13 @@ class WorkContext:
     object: ObjectRef
     gripper: str
     settings: SimSettings
+    configuration_match: ConfigurationMatch | None = None  # shortcut 2 on: its tolerance
+
+
+def configuration_match_of(spec: ExplorationSpec) -> ConfigurationMatch | None:
+    """What workers are told about shortcut 2: its tolerance, or None when it is off."""
+    shortcuts = spec.shortcuts
+    return shortcuts.configuration_match if shortcuts.configuration_inference else None
 
 
 class Catalog:
@@ -77,7 +84,8 @@ class Catalog:
             mesh_format=obj.mesh_format,
             properties=obj.properties or {},
         )
-        context = WorkContext(object=ref, gripper=spec.gripper, settings=spec.settings)
+        context = WorkContext(object=ref, gripper=spec.gripper, settings=spec.settings,
+                              configuration_match=configuration_match_of(spec))
         with self._lock:
             if len(self._contexts) >= _MAX_CACHED:
                 self._contexts.clear()

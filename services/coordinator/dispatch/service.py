@@ -249,6 +249,7 @@ class Dispatcher:
                 object=ctx.object,
                 gripper=ctx.gripper,
                 settings=ctx.settings,
+                configuration_match=ctx.configuration_match,
             )
             query.reply(keys.lease_reply_key(tile.tile_id), encode(message))
         self.counters.tiles_leased.inc(len(tiles))

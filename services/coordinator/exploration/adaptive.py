@@ -127,6 +127,7 @@ _SAMPLE_COLUMNS = (
     PoseRow.signature,
     PoseRow.grasp,
     PoseRow.worker_id,
+    PoseRow.inferred_from,
 )
 
 

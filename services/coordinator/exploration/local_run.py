@@ -4,7 +4,8 @@ For tests, benchmarks and the CLI on one machine. `workers` simulated workers le
 each per round; their reports are ingested in an order drawn from `seed`, and each tile's
 results may arrive in several partial batches, so that one spec can be driven through many
 interleavings (what different numbers of real workers would produce). Evaluations go through
-`evaluate`, by default pybullet in this process or in a process pool.
+`evaluate`, by default pybullet in this process or in a process pool; it gets a tile's poses
+and, when the exploration asks for shortcut 2, its tolerance (what a worker's lease carries).
 """
 
 from __future__ import annotations
@@ -15,15 +16,19 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 
+from graspscape.services.coordinator.dispatch.catalog import configuration_match_of
 from graspscape.services.coordinator.store.ingest import ingest_results
+from graspscape.services.coordinator.store.models import ExplorationRow
 from graspscape.services.coordinator.store.queue import lease_tiles
+from graspscape.shared.specs.exploration import ConfigurationMatch, ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import PoseResult
 from graspscape.shared.specs.sim import SimSettings
+from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-Evaluate = Callable[[Sequence[Pose]], list[PoseResult]]
+Evaluate = Callable[[Sequence[Pose], ConfigurationMatch | None], list[PoseResult]]
 
 
 @dataclass
@@ -41,6 +46,19 @@ def _eval_one(args: tuple[Pose, ObjectSpec, str, SimSettings]) -> PoseResult:
     return evaluate_pose(pose, obj=obj, gripper=gripper, settings=settings)
 
 
+def _eval_normal(args: tuple[list[Pose], ObjectSpec, str, SimSettings, ConfigurationMatch]
+                 ) -> list[PoseResult]:
+    """The poses of one normal in tile order, with shortcut 2 among them (donors never come
+    from another normal, so this equals one donor pool for the whole tile)."""
+    from graspscape.workers.sim.configuration_inference import DonorPool
+    from graspscape.workers.sim.evaluate import evaluate_pose
+
+    poses, obj, gripper, settings, match = args
+    donors = DonorPool(match)
+    return [evaluate_pose(p, obj=obj, gripper=gripper, settings=settings, donors=donors)
+            for p in poses]
+
+
 def pybullet_evaluator(
     obj: ObjectSpec,
     gripper: str = "robotiq_3f",
@@ -55,18 +73,29 @@ def pybullet_evaluator(
     nothing but the time."""
     settings = settings or SimSettings()
 
-    def run(poses: Sequence[Pose]) -> list[PoseResult]:
-        todo = [p for p in poses if cache is None or p.key() not in cache]
-        args = [(p, obj, gripper, settings) for p in todo]
-        if pool is not None:
-            done = list(pool.map(_eval_one, args, chunksize=4))
+    def run(poses: Sequence[Pose], match: ConfigurationMatch | None = None
+            ) -> list[PoseResult]:
+        # With shortcut 2 a result depends on the poses evaluated before it on its normal:
+        # such results are cached apart from plain ones.
+        prefix = "" if match is None else f"configuration:{match.model_dump_json()}:"
+        todo = [p for p in poses if cache is None or prefix + p.key() not in cache]
+        def mapper(fn, items, chunksize=1):
+            return pool.map(fn, items, chunksize=chunksize) if pool is not None else map(fn, items)
+
+        if match is None:
+            done = list(mapper(_eval_one, [(p, obj, gripper, settings) for p in todo], 4))
         else:
-            done = [_eval_one(a) for a in args]
+            normals: dict[tuple[float, ...], list[Pose]] = {}
+            for p in todo:
+                normals.setdefault((p.theta, p.phi, p.roll, p.pitch, p.yaw), []).append(p)
+            args = [(group, obj, gripper, settings, match) for group in normals.values()]
+            done = [r for group in mapper(_eval_normal, args) for r in group]
         if cache is None:
-            return done
+            by_key = {r.pose_key: r for r in done}
+            return [by_key[p.key()] for p in poses]
         for r in done:
-            cache[r.pose_key] = r
-        return [cache[p.key()] for p in poses]
+            cache[prefix + r.pose_key] = r
+        return [cache[prefix + p.key()] for p in poses]
 
     return run
 
@@ -93,10 +122,17 @@ def run_local(
                            lease_tiles(session, worker_id=f"local-{w}", n=1, lease_seconds=3600)]
         if not leased:
             break
+        with sessions() as session:
+            matches = {
+                eid: configuration_match_of(ExplorationSpec.model_validate(spec))
+                for eid, spec in session.execute(
+                    select(ExplorationRow.id, ExplorationRow.spec).where(
+                        ExplorationRow.id.in_({t.exploration_id for _, t in leased})))
+            }
         batches = []
         for worker, tile in leased:
             t0 = time.perf_counter()
-            results = evaluate(tile.poses())
+            results = evaluate(tile.poses(), matches.get(tile.exploration_id))
             stats.eval_s += time.perf_counter() - t0
             stats.evaluated += len(results)
             order = list(results)

@@ -86,10 +86,16 @@ def normal_segments(n_r: int) -> Iterator[tuple[int, int]]:
             stack += [(lo, mid), (mid, hi)]
 
 
+# Sources of results whose grasp was synthesized for the pose itself (shortcut 2 reuses only
+# the trajectory's outcome), as opposed to results copied onto it by the coordinator.
+SYNTHESIZED = frozenset({"evaluated", "shortcut:configuration"})
+
+
 def normal_decisions(
     lattice: Lattice, p: Point, lookup: Lookup, mu_step_max: float | None
 ) -> tuple[list[Proposal], list[Inference]]:
-    """Shortcut 1 for the normal through coarse point p (only evaluated ends decide)."""
+    """Shortcut 1 for the normal through coarse point p (only ends whose grasp was
+    synthesized here decide: evaluated ones, or ones that reused a matching grasp's outcome)."""
     s = lattice.scale(0)
     if lattice.birth(p) != 0:
         return [], []
@@ -101,7 +107,7 @@ def normal_decisions(
             continue
         plo, phi_ = Point(p.K, p.J, lo * s, p.a), Point(p.K, p.J, hi * s, p.a)
         a, b = lookup(plo), lookup(phi_)
-        if a is None or b is None or a.source != "evaluated" or b.source != "evaluated":
+        if a is None or b is None or a.source not in SYNTHESIZED or b.source not in SYNTHESIZED:
             continue
         mid = (lo + hi) // 2
         if differs(a, b, mu_step_max):

@@ -52,7 +52,7 @@ class Sample:
     contacts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     joints: dict[str, float] = field(default_factory=dict)
     grasp: dict[str, Any] | None = None
-    source: str = "evaluated"  # or "shortcut:normal", "shortcut:symmetry"
+    source: str = "evaluated"  # or "shortcut:normal", "shortcut:configuration", "shortcut:symmetry"
 
     @staticmethod
     def from_row(row: Any) -> Sample:
@@ -73,7 +73,6 @@ class Sample:
             contacts[d] = tuple(
                 sum(w * pos[i] for (pos, _), w in zip(items, ws, strict=True)) for i in range(3)
             )
-        worker = row.worker_id or ""
         return Sample(
             key=row.pose_key,
             theta=row.theta,
@@ -90,12 +89,24 @@ class Sample:
             contacts=contacts,  # type: ignore[arg-type]
             joints={k: float(v) for k, v in (sig.get("joint_angles") or {}).items()},
             grasp=row.grasp,
-            source=worker if worker.startswith("shortcut:") else "evaluated",
+            source=source_of(row),
         )
 
     def direction(self) -> tuple[float, float, float]:
         st = math.sin(self.theta)
         return (st * math.cos(self.phi), st * math.sin(self.phi), math.cos(self.theta))
+
+
+def source_of(row: Any) -> str:
+    """How a stored pose was obtained: "evaluated" (simulated through), or the shortcut that
+    supplied its result ("shortcut:normal" or "shortcut:symmetry" copied by the coordinator,
+    "shortcut:configuration" synthesized by a worker, trajectory outcome reused)."""
+    worker = row.worker_id or ""
+    if worker.startswith("shortcut:"):
+        return worker
+    if getattr(row, "inferred_from", None):
+        return "shortcut:configuration"
+    return "evaluated"
 
 
 def start_frame(s: Sample) -> np.ndarray:

@@ -12,6 +12,7 @@ import io
 import json
 from typing import Any
 
+from graspscape.services.coordinator.manifolds.behaviour import source_of
 from graspscape.services.coordinator.manifolds.grouping import label_name
 from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
 from sqlalchemy import select
@@ -19,7 +20,8 @@ from sqlalchemy.orm import Session
 
 COLUMNS = (
     "pose_key", "theta", "phi", "r", "roll", "pitch", "yaw", "outcome", "viable", "mu_s",
-    "effort_max_nm", "effective_r", "manifold", "source", "links_in_contact", "grasp",
+    "effort_max_nm", "effective_r", "manifold", "source", "inferred_from", "links_in_contact",
+    "grasp",
     "signature", "eval_time_s",
 )
 
@@ -37,14 +39,14 @@ def pose_records(session: Session, exploration_id: int) -> list[dict[str, Any]]:
         select(PoseRow).where(PoseRow.exploration_id == exploration_id).order_by(PoseRow.pose_key)
     )
     for row in rows:
-        worker = row.worker_id or ""
         out.append({
             "pose_key": row.pose_key, "theta": row.theta, "phi": row.phi, "r": row.r,
             "roll": row.roll, "pitch": row.pitch, "yaw": row.yaw, "outcome": row.outcome,
             "viable": bool(row.viable), "mu_s": row.mu_s, "effort_max_nm": row.effort_max_nm,
             "effective_r": row.effective_r,
             "manifold": labels.get(row.manifold_id, "") if row.manifold_id else "",
-            "source": worker if worker.startswith("shortcut:") else "evaluated",
+            "source": source_of(row),
+            "inferred_from": row.inferred_from or "",
             "links_in_contact": " ".join((row.signature or {}).get("links_in_contact", ())),
             "grasp": json.dumps(row.grasp, sort_keys=True) if row.grasp else "",
             "signature": json.dumps(row.signature, sort_keys=True) if row.signature else "",

@@ -73,6 +73,7 @@ def _values(result: PoseResult) -> tuple[Any, ...]:
         _json_text(result.signature),
         _json_text(result.grasp),
         result.eval_time_s,
+        result.inferred_from,
     )
 
 
@@ -93,6 +94,7 @@ _PER_POSE = (
     ("signature", "text"),
     ("grasp", "text"),
     ("eval_time_s", "float8"),
+    ("inferred_from", "varchar"),
 )
 _PER_BATCH = ("exploration_id", "tile_id", "worker_id", "created_at")
 _CONFLICT = "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"

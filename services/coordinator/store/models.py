@@ -176,6 +176,8 @@ class PoseRow(Base):
     manifold_id: Mapped[int | None] = mapped_column(ForeignKey("manifolds.id", ondelete="SET NULL"))
     worker_id: Mapped[str | None] = mapped_column(String(128))
     eval_time_s: Mapped[float] = mapped_column(Float)
+    # Shortcut 2: the pose whose outcome, μs and effort this one reuses (same tile and normal).
+    inferred_from: Mapped[str | None] = mapped_column(String(128))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
