@@ -6,13 +6,18 @@ import json
 import threading
 from datetime import timedelta
 
+import graspscape.services.coordinator.store.ingest as ingest_module
 import pytest
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.service import cancel_exploration
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.ingest import _PER_POSE, _values, ingest_results
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
-from graspscape.services.coordinator.store.queue import lease_tiles, requeue_expired
+from graspscape.services.coordinator.store.queue import (
+    LeasedTile,
+    lease_tiles,
+    requeue_expired,
+)
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import ContactPoint, GraspSignature
 from sqlalchemy import func, select, text
@@ -318,6 +323,54 @@ def test_concurrent_reports_of_the_same_tiles_count_each_pose_once(
     assert row.viable_count == sum(r.viable for _, results in batches for r in results)
     with sessions() as s:
         assert pose_count(s, eid) == total
+
+
+def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
+    sessions: sessionmaker[Session], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two ingests finish the last two tiles at the same time: whichever commits last must
+    see the other's tile done and finish the exploration (on PostgreSQL each statement reads
+    what was committed when it started, so the check must come after the row lock)."""
+    with sessions() as s:
+        eid = make_exploration(s, dtheta=1.5, target=10_000)
+        leased = lease_tiles(s, worker_id="w", n=100, lease_seconds=600)
+        assert len(leased) >= 2
+        for t in leased[:-2]:
+            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                           results=fake_results(t.poses(), seed=t.tile_id))
+    first, second = leased[-2:]
+    inside, go_on = threading.Event(), threading.Event()
+    hook = ingest_module.after_ingest
+
+    def held_open(session: Session, **kwargs: object) -> None:
+        hook(session, **kwargs)  # type: ignore[arg-type]
+        if threading.current_thread().name == "first":  # keep its transaction open
+            inside.set()
+            go_on.wait(30)
+
+    monkeypatch.setattr(ingest_module, "after_ingest", held_open)
+    errors: list[BaseException] = []
+
+    def report(t: LeasedTile) -> None:
+        try:
+            with sessions() as s:
+                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                               results=fake_results(t.poses(), seed=t.tile_id))
+        except BaseException as exc:
+            errors.append(exc)
+
+    one = threading.Thread(target=report, args=(first,), name="first")
+    one.start()
+    assert inside.wait(30)
+    two = threading.Thread(target=report, args=(second,), name="second")
+    two.start()
+    two.join(1.0)  # it waits for the first to commit (row lock, or SQLite's write lock)
+    go_on.set()
+    one.join(60)
+    two.join(60)
+    assert not errors
+    row = exploration_row(sessions, eid)
+    assert (row.status, row.poses_done) == ("done", row.poses_total)
 
 
 def exploration_row(sessions: sessionmaker[Session], eid: int) -> ExplorationRow:

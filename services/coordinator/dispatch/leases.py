@@ -48,13 +48,15 @@ _HELD = select(TileRow.id).where(
 def release_unheld(
     session: Session, *, worker_id: str, holding: Collection[int], now: datetime | None = None
 ) -> int:
-    """Tiles leased to a worker that says it does not hold them: their lease reply was lost."""
+    """Tiles leased to a worker that says it does not hold them: their lease reply was lost.
+
+    Commits what it releases; when there is nothing to release, it writes nothing and leaves
+    the transaction to the caller (the lease that follows goes on in it)."""
     now = now or utcnow()
     # Almost always nothing to release: a read first keeps the common case free of a write
-    # transaction (SQLite has a single writer).
+    # (SQLite has a single writer).
     held = set(session.scalars(_HELD, {"owner": worker_id}))
     if not held - set(holding):
-        session.rollback()  # end the read transaction
         return 0
     stmt = update(TileRow).where(
         TileRow.state == TileState.LEASED, TileRow.lease_owner == worker_id

@@ -18,19 +18,18 @@ from typing import Any
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.adaptive import after_ingest
-from graspscape.services.coordinator.store.base import UTCDateTime, utcnow
+from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
-    ExplorationStatus,
     PoseRow,
     TileRow,
     TileState,
 )
-from graspscape.services.coordinator.store.queue import EXPLORATION_COMPLETE
+from graspscape.services.coordinator.store.queue import finish_complete_explorations
 from graspscape.shared.specs.results import PoseResult
 from pydantic import BaseModel
 from pydantic_core import to_json
-from sqlalchemy import bindparam, case, select, update
+from sqlalchemy import bindparam, select, update
 from sqlalchemy.orm import Session
 
 
@@ -98,21 +97,19 @@ _PER_POSE = (
 )
 _PER_BATCH = ("exploration_id", "tile_id", "worker_id", "created_at")
 _CONFLICT = "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"
-# PostgreSQL: the batch's rows as one JSON array of arrays, unpacked by the server. One
-# short statement that psycopg prepares once; the JSON is written by pydantic in one call,
-# where dumping a column array each (or a multi-row VALUES with thousands of placeholders)
-# cost more client time than the insert took the server. Floats travel as their shortest
-# round-trip text (non-finite ones as "NaN"/"Infinity" strings, which float8 reads).
-_PG_CASTS = {"varchar": "", "float8": "::float8", "boolean": "::boolean", "text": "::json"}
+_JSON_COLUMNS = ("contacts_per_link", "signature", "grasp")
 _PG_INSERT = (
-    "INSERT INTO poses ({columns}) SELECT {batch}, {select} "
-    "FROM jsonb_array_elements(%(rows)s::jsonb) AS e {conflict}"
+    "INSERT INTO poses ({columns}) SELECT {batch}, {select} FROM unnest({arrays}) AS u({names}) "
+    "{conflict}"
 ).format(
     columns=", ".join(_PER_BATCH + tuple(name for name, _ in _PER_POSE)),
     batch=", ".join(f"%({name})s" for name in _PER_BATCH),
     select=", ".join(
-        f"(e->>{i}){_PG_CASTS[sql_type]}" for i, (_, sql_type) in enumerate(_PER_POSE)
+        f"u.{name}::json" if name in _JSON_COLUMNS else f"u.{name}" for name, _ in _PER_POSE
     ),
+    # %(...)b: binary parameters, which psycopg dumps without escaping each array element.
+    arrays=", ".join(f"%({name})b::{sql_type}[]" for name, sql_type in _PER_POSE),
+    names=", ".join(name for name, _ in _PER_POSE),
     conflict=_CONFLICT,
 )
 _N_COLUMNS = len(_PER_BATCH) + len(_PER_POSE)
@@ -142,8 +139,13 @@ def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, 
     if created_at is not None:
         batch = (*batch[:3], created_at(batch[3]))
     if dialect.name == "postgresql":
+        # One short statement with a column array each: psycopg parses and prepares it once.
+        # A multi-row VALUES statement has thousands of placeholders that psycopg re-parses
+        # on every batch, which took half of the ingest time. (One JSON array of the rows
+        # instead saved little client time and cost the server more than that.)
         params: dict[str, Any] = dict(zip(_PER_BATCH, batch, strict=True))
-        params["rows"] = to_json(rows, inf_nan_mode="strings").decode()
+        for (name, _), column in zip(_PER_POSE, zip(*rows, strict=True), strict=True):
+            params[name] = list(column)
         result = connection.exec_driver_sql(_PG_INSERT, params)
         return [bool(v) for (v,) in result]
     if dialect.name != "sqlite":
@@ -167,24 +169,16 @@ def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, 
 _TILE = select(TileRow.exploration_id, TileRow.state, TileRow.lease_epoch).where(
     TileRow.id == bindparam("tile_id")
 )
-_NOW = bindparam("now", type_=UTCDateTime())
-_COUNTS = {
-    "poses_done": ExplorationRow.poses_done + bindparam("inserted"),
-    "viable_count": ExplorationRow.viable_count + bindparam("viable"),
-    "updated_at": _NOW,
-}
-# The exploration's counters, and its status and creation time for the adaptive hook, in one
-# statement; when the batch finished its tile, the exploration is finished by the same one
-# if that was its last open tile.
+# The exploration's counters; it returns the status and creation time the adaptive hook needs.
 _COUNT = (
     update(ExplorationRow)
     .where(ExplorationRow.id == bindparam("exploration_id"))
-    .values(**_COUNTS)
+    .values(
+        poses_done=ExplorationRow.poses_done + bindparam("inserted"),
+        viable_count=ExplorationRow.viable_count + bindparam("viable"),
+        updated_at=bindparam("now"),
+    )
     .returning(ExplorationRow.status, ExplorationRow.created_at)
-)
-_COUNT_AND_FINISH = _COUNT.values(
-    status=case((EXPLORATION_COMPLETE, ExplorationStatus.DONE.value), else_=ExplorationRow.status),
-    finished_at=case((EXPLORATION_COMPLETE, _NOW), else_=ExplorationRow.finished_at),
 )
 _MOVABLE = (TileState.LEASED, TileState.QUEUED)
 _FINISH_TILE = (
@@ -245,19 +239,28 @@ def ingest_results(
     # The lease under which the results were computed is the tile's current one when the
     # epochs match. Its tile may be `queued` if the lease ran out but nobody re-leased it
     # yet: the complete result then still finishes it, sparing a second evaluation.
-    if final and tile.state in _MOVABLE and tile.lease_epoch == lease_epoch:
+    movable = final and tile.state in _MOVABLE and tile.lease_epoch == lease_epoch
+    exploration = None
+    if inserted or movable:
+        # The counters first: the exploration row's lock, held to the commit, makes the
+        # ingests of one exploration take turns. The tile, and whether it was the
+        # exploration's last open one, only after it: a statement started once the lock is
+        # held reads the others' tiles as committed (on PostgreSQL each statement reads what
+        # was committed when it started). It also returns what the adaptive hook needs.
+        exploration = connection.execute(
+            _COUNT,
+            {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
+             "now": now},
+        ).one()
+    if movable:
         done = connection.execute(
             _FINISH_TILE, {"tile_id": tile_id, "epoch": lease_epoch, "now": now}
         )
         moved = done.rowcount == 1
         if moved:
             state = TileState.DONE
-    if inserted or moved:
-        exploration = connection.execute(
-            _COUNT_AND_FINISH if moved else _COUNT,
-            {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
-             "now": now},
-        ).one()
+            finish_complete_explorations(session, [tile.exploration_id], now=now)
+    if exploration is not None and (inserted or moved):
         # Adaptive exploration (exploration/adaptive.py): border refinement, shortcuts, local
         # search and manifolds, decided from what is stored now. In this transaction, after the
         # counter update whose row lock makes ingests of one exploration take turns.

@@ -27,17 +27,7 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.services.coordinator.store.workers import touch_worker
 from graspscape.shared.specs.pose import Pose, tile_poses
 from pydantic import BaseModel, ConfigDict
-from sqlalchemy import (
-    ColumnElement,
-    String,
-    and_,
-    bindparam,
-    case,
-    cast,
-    literal,
-    select,
-    update,
-)
+from sqlalchemy import ColumnElement, String, bindparam, case, cast, literal, select, update
 from sqlalchemy.orm import Session
 
 
@@ -298,18 +288,16 @@ def requeue_expired(
 # the exploration's open tiles up in the (state, exploration_id, ...) index instead of reading
 # every tile of the exploration, each time a tile finishes.
 _OPEN_TILE_STATES = tuple(s for s in TileState if s not in TERMINAL_TILE_STATES)
-# An exploration row (in an UPDATE of explorations) that is complete now: still queued or
-# running, and none of its tiles open.
-EXPLORATION_COMPLETE = and_(
-    ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
-    ~select(TileRow.id)
-    .where(TileRow.exploration_id == ExplorationRow.id)
-    .where(TileRow.state.in_(_OPEN_TILE_STATES))
-    .exists(),
-)
 _FINISH_EXPLORATIONS = (
     update(ExplorationRow)
-    .where(ExplorationRow.id.in_(bindparam("ids", expanding=True)), EXPLORATION_COMPLETE)
+    .where(
+        ExplorationRow.id.in_(bindparam("ids", expanding=True)),
+        ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
+        ~select(TileRow.id)
+        .where(TileRow.exploration_id == ExplorationRow.id)
+        .where(TileRow.state.in_(_OPEN_TILE_STATES))
+        .exists(),
+    )
     .values(status=ExplorationStatus.DONE, finished_at=bindparam("now"),
             updated_at=bindparam("now"))
 )
