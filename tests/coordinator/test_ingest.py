@@ -15,6 +15,7 @@ from graspscape.services.coordinator.store.ingest import _PER_POSE, _values, ing
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
 from graspscape.services.coordinator.store.queue import (
     LeasedTile,
+    fail_tile,
     lease_tiles,
     requeue_expired,
 )
@@ -378,3 +379,57 @@ def exploration_row(sessions: sessionmaker[Session], eid: int) -> ExplorationRow
         row = s.get(ExplorationRow, eid)
         assert row is not None
         return row
+
+
+def test_a_failure_and_an_ingest_on_the_last_two_tiles_finish_the_exploration(
+    sessions: sessionmaker[Session], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A worker's failure report and another worker's results end the last two tiles at the
+    same time: the exploration must still finish (failure and requeue take the exploration's
+    lock before touching a tile, as ingest does)."""
+    with sessions() as s:
+        eid = make_exploration(s, dtheta=1.5, target=10_000)
+        leased = lease_tiles(s, worker_id="w", n=100, lease_seconds=600)
+        assert len(leased) >= 2
+        for t in leased[:-2]:
+            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                           results=fake_results(t.poses(), seed=t.tile_id))
+    reported, failing = leased[-2:]
+    inside, go_on = threading.Event(), threading.Event()
+    hook = ingest_module.after_ingest
+
+    def held_open(session: Session, **kwargs: object) -> None:
+        hook(session, **kwargs)  # type: ignore[arg-type]
+        inside.set()
+        go_on.wait(30)
+
+    monkeypatch.setattr(ingest_module, "after_ingest", held_open)
+    errors: list[BaseException] = []
+
+    def report() -> None:
+        try:
+            with sessions() as s:
+                ingest_results(s, tile_id=reported.tile_id, lease_epoch=reported.lease_epoch,
+                               worker_id="w", results=fake_results(reported.poses(), seed=1))
+        except BaseException as exc:
+            errors.append(exc)
+
+    def fail() -> None:
+        try:
+            with sessions() as s:
+                fail_tile(s, tile_id=failing.tile_id, lease_epoch=failing.lease_epoch,
+                          error="boom", max_attempts=1)
+        except BaseException as exc:
+            errors.append(exc)
+
+    one = threading.Thread(target=report)
+    one.start()
+    assert inside.wait(30)
+    two = threading.Thread(target=fail)
+    two.start()
+    two.join(1.0)  # it waits for the ingest to commit (row lock, or SQLite's write lock)
+    go_on.set()
+    one.join(60)
+    two.join(60)
+    assert not errors
+    assert exploration_row(sessions, eid).status == "done"

@@ -192,6 +192,10 @@ def fail_tile(
     Returns the tile's state afterwards. A report under a stale epoch changes nothing.
     """
     now = now or utcnow()
+    exploration_id = session.scalar(select(TileRow.exploration_id).where(TileRow.id == tile_id))
+    if exploration_id is None:
+        raise NotFound(f"tile {tile_id} does not exist")
+    lock_explorations(session, [exploration_id])
     # One conditional UPDATE: atomic against the sweeper and a re-lease on both databases.
     row = session.execute(
         update(TileRow)
@@ -236,6 +240,14 @@ def requeue_where(
     The one mechanism behind lease expiry and lost workers, so both count attempts alike.
     """
     leased = (TileRow.state == TileState.LEASED, *conditions)
+    explorations = session.scalars(select(TileRow.exploration_id).where(*leased).distinct()).all()
+    if not explorations:
+        session.commit()
+        return 0, 0
+    lock_explorations(session, explorations)
+    # Tiles that came to match since are left to the next call: their explorations are not
+    # locked here.
+    leased = (*leased, TileRow.exploration_id.in_(explorations))
     failed_rows = session.execute(
         update(TileRow)
         .where(*leased, TileRow.attempts >= max_attempts)
@@ -301,6 +313,19 @@ _FINISH_EXPLORATIONS = (
     .values(status=ExplorationStatus.DONE, finished_at=bindparam("now"),
             updated_at=bindparam("now"))
 )
+
+
+def lock_explorations(session: Session, exploration_ids: Iterable[int]) -> None:
+    """Row locks on explorations (in id order), held to the commit, before any tile of theirs
+    changes state. Ingest, failure and requeue all take them first, so they never wait on each
+    other in opposite orders, and the finish check that follows reads the others' tiles as
+    committed (on PostgreSQL each statement reads what was committed when it started; a
+    statement that waited on the row lock would still read the tiles from before). SQLite's
+    write lock serializes these transactions anyway; it renders no FOR UPDATE."""
+    ids = sorted(set(exploration_ids))
+    if ids:
+        session.execute(select(ExplorationRow.id).where(ExplorationRow.id.in_(ids))
+                        .order_by(ExplorationRow.id).with_for_update()).all()
 
 
 def finish_complete_explorations(
