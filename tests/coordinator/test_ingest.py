@@ -326,12 +326,10 @@ def test_concurrent_reports_of_the_same_tiles_count_each_pose_once(
         assert pose_count(s, eid) == total
 
 
-def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
-    sessions: sessionmaker[Session], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """Two ingests finish the last two tiles at the same time: whichever commits last must
-    see the other's tile done and finish the exploration (on PostgreSQL each statement reads
-    what was committed when it started, so the check must come after the row lock)."""
+def all_but_two_reported(
+    sessions: sessionmaker[Session],
+) -> tuple[int, tuple[LeasedTile, LeasedTile]]:
+    """An exploration with every tile leased and all but the last two reported."""
     with sessions() as s:
         eid = make_exploration(s, dtheta=1.5, target=10_000)
         leased = lease_tiles(s, worker_id="w", n=100, lease_seconds=600)
@@ -339,7 +337,16 @@ def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
         for t in leased[:-2]:
             ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
                            results=fake_results(t.poses(), seed=t.tile_id))
-    first, second = leased[-2:]
+    return eid, (leased[-2], leased[-1])
+
+
+def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
+    sessions: sessionmaker[Session], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two ingests finish the last two tiles at the same time: whichever commits last must
+    see the other's tile done and finish the exploration (on PostgreSQL each statement reads
+    what was committed when it started, so the check must come after the row lock)."""
+    eid, (first, second) = all_but_two_reported(sessions)
     inside, go_on = threading.Event(), threading.Event()
     hook = ingest_module.after_ingest
 
@@ -387,14 +394,7 @@ def test_a_failure_and_an_ingest_on_the_last_two_tiles_finish_the_exploration(
     """A worker's failure report and another worker's results end the last two tiles at the
     same time: the exploration must still finish (failure and requeue take the exploration's
     lock before touching a tile, as ingest does)."""
-    with sessions() as s:
-        eid = make_exploration(s, dtheta=1.5, target=10_000)
-        leased = lease_tiles(s, worker_id="w", n=100, lease_seconds=600)
-        assert len(leased) >= 2
-        for t in leased[:-2]:
-            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
-                           results=fake_results(t.poses(), seed=t.tile_id))
-    reported, failing = leased[-2:]
+    eid, (reported, failing) = all_but_two_reported(sessions)
     inside, go_on = threading.Event(), threading.Event()
     hook = ingest_module.after_ingest
 
