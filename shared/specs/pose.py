@@ -30,6 +30,10 @@ class Pose(BaseModel):
     pitch: float = Field(default=0.0, ge=-math.pi, le=math.pi, description="tilt, rad")
     yaw: float = Field(default=0.0, ge=-math.pi / 2, le=math.pi / 2, description="tilt, rad")
 
+    def normal(self) -> tuple[float, float, float, float, float]:
+        """The approach line the pose lies on: its direction and attitude, without r."""
+        return (self.theta, self.phi, self.roll, self.pitch, self.yaw)
+
     def key(self) -> str:
         """A stable text key: equal for poses that are the same grid point."""
         phi = math.fmod(self.phi, _TAU)

@@ -26,12 +26,6 @@ from graspscape.shared.specs.exploration import ConfigurationMatch
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import GraspConfiguration, PoseResult
 
-Normal = tuple[float, float, float, float, float]
-
-
-def normal_of(pose: Pose) -> Normal:
-    return (pose.theta, pose.phi, pose.roll, pose.pitch, pose.yaw)
-
 
 def orientation_angle(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     """Angle of the rotation between two unit quaternions (x, y, z, w), rad."""
@@ -57,17 +51,17 @@ class DonorPool:
 
     def __init__(self, tolerance: ConfigurationMatch) -> None:
         self.tolerance = tolerance
-        self.donors: dict[Normal, list[PoseResult]] = {}
+        self.donors: dict[tuple[float, ...], list[PoseResult]] = {}
 
     def add(self, result: PoseResult) -> None:
         if result.grasp is not None and result.signature is not None \
                 and result.inferred_from is None:
-            self.donors.setdefault(normal_of(result.pose), []).append(result)
+            self.donors.setdefault(result.pose.normal(), []).append(result)
 
     def find(self, pose: Pose, grasp: GraspConfiguration,
              links: tuple[str, ...]) -> PoseResult | None:
         """The closest matching donor on the pose's normal (the earliest among equals)."""
-        candidates = self.donors.get(normal_of(pose), [])
+        candidates = self.donors.get(pose.normal(), [])
         best: tuple[float, int] | None = None
         for index, donor in enumerate(candidates):
             if donor.signature.links_in_contact != links:  # type: ignore[union-attr]

@@ -26,7 +26,7 @@ from graspscape.shared.specs.results import (
     PoseResult,
 )
 from graspscape.shared.specs.sim import SimSettings
-from graspscape.workers.sim.configuration_inference import DonorPool
+from graspscape.workers.sim.configuration_inference import DonorPool, inferred
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.grasp_metrics import scene_metrics
 from graspscape.workers.sim.gripper.hand import Hand
@@ -226,9 +226,7 @@ class Evaluator:
         donor = None if donors is None else donors.find(
             pose, result["grasp"], result["signature"].links_in_contact)
         if donor is not None:
-            result.update(mu_s=donor.mu_s, viable=donor.viable, inferred_from=donor.pose_key,
-                          effort_max_nm=donor.effort_max_nm)
-            return self._finish(started, donor.outcome, result)
+            return inferred(self._finish(started, donor.outcome, result), donor)
         held, qualities, effort = self._run_trajectory(phases)
         result["effort_max_nm"] = effort
         if held:

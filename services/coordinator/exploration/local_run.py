@@ -87,7 +87,7 @@ def pybullet_evaluator(
         else:
             normals: dict[tuple[float, ...], list[Pose]] = {}
             for p in todo:
-                normals.setdefault((p.theta, p.phi, p.roll, p.pitch, p.yaw), []).append(p)
+                normals.setdefault(p.normal(), []).append(p)
             args = [(group, obj, gripper, settings, match) for group in normals.values()]
             done = [r for group in mapper(_eval_normal, args) for r in group]
         if cache is None:
