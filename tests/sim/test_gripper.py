@@ -9,6 +9,8 @@ import pybullet as p
 import pytest
 from graspscape.shared.specs.gripper import list_grippers, load_gripper
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import PhaseTimes
+from graspscape.shared.specs.sim import PhysicsSettings, SimSettings
 from graspscape.workers.sim.gripper.hand import Hand
 from graspscape.workers.sim.gripper.urdf import gripper_urdf
 
@@ -57,3 +59,29 @@ def test_parallel_jaw_gripper_holds_the_cube(make_evaluator):
     result = evaluator.evaluate(Pose(theta=math.pi / 2, phi=0.0, r=0.02))
     assert result.viable
     assert {"L_pad", "R_pad"} <= set(result.signature.links_in_contact)
+
+
+@pytest.mark.parametrize("iterations", [50, 10])
+def test_a_blocked_phalanx_pushes_with_its_full_share_of_the_closing_effort(make_evaluator,
+                                                                           iterations):
+    # G_c closes with a constant torque τ_c. A velocity motor aimed at the closing speed reached
+    # only part of its force cap within the solver's iterations when blocked; a blocked phalanx
+    # must push with its whole share, whatever the iteration count.
+    settings = SimSettings(physics=PhysicsSettings(solver_iterations=iterations))
+    evaluator = make_evaluator("sphere", settings=settings)
+    scene, hand = evaluator.scene, evaluator.scene.hand
+    evaluator._reset()
+    position, rotation, target, _ = evaluator._start_pose(Pose(theta=0.0, phi=0.0, r=0.02))
+    assert evaluator.policy.synthesize(scene, position, rotation, target, settings,
+                                       PhaseTimes()) is None
+    scene.step()
+    touching = {c[3] for c in scene.contacts()}
+    pushing = 0
+    for finger in hand.fingers:
+        for k in range(finger.active):
+            if finger.joints[k] in touching:
+                torque = p.getJointState(hand.body, finger.joints[k],
+                                         physicsClientId=scene.client)[3]
+                assert torque == pytest.approx(hand.effort * finger.shares[k], rel=0.01)
+                pushing += 1
+    assert pushing >= 3

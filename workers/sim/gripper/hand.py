@@ -5,8 +5,9 @@ a phalanx that is not yet closing is held at its angle by a stiff position motor
 linkage); the first phalanx closes under a force-capped velocity motor (so it pushes with the
 finger's closing effort once blocked, and never overshoots a limit, which pure torque control
 does on such light links); when a closing phalanx halts (blocked by the object, or at its
-limit), the next one starts closing too, and the blocked ones keep pushing. A finger whose
-phalanges have all halted is done. See docs/simulation.md.
+limit), the next one starts closing too, and the blocked ones keep pushing with their full
+share of the effort (`settle`). A finger whose phalanges have all halted is done. See
+docs/simulation.md.
 """
 
 from __future__ import annotations
@@ -19,6 +20,15 @@ import pybullet as p
 from graspscape.shared.specs.gripper import GripperSpec
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.gripper.urdf import write_gripper_urdf
+
+# The velocity target of a blocked phalanx: beyond what any link reaches within one step, so its
+# motor row saturates at the force cap in the solver's first iteration and the phalanx pushes
+# with exactly its share of τ_c. With the closing speed as target, the row gains only about
+# speed × the link's effective inertia per iteration: a 0.05 kg distal link needs ≈100
+# iterations to reach its cap, so at 50 the finger pushed with a fraction of τ_c that depended
+# on the iteration count (docs/simulation.md, "Blocked phalanges push").
+PUSH_VELOCITY = 1000.0
+LIMIT_MARGIN = 1e-3  # rad (or m): a phalanx this close to its upper limit is at it
 
 
 @dataclass
@@ -114,6 +124,33 @@ class Hand:
                                 targetVelocity=speed, force=self.effort * finger.shares[k],
                                 physicsClientId=self.client)
 
+    def _settle(self, finger: FingerJoints, k: int, touching: frozenset[int], *,
+                stop_free: bool) -> None:
+        """A halted phalanx: at its upper limit, it holds still there (the stop takes the
+        effort; pushed on, pybullet's limit yields); blocked by the object (it or a phalanx
+        beyond it touches), it pushes with its full share of the effort. Otherwise it is
+        free: with `stop_free` it holds still, else its closing motor stays on (pushed, it
+        would swing on at full effort)."""
+        if self.finger_angles(finger)[k] >= finger.uppers[k] - LIMIT_MARGIN:
+            target = 0.0
+        elif touching.intersection(finger.joints[k:]):
+            target = PUSH_VELOCITY
+        elif stop_free:
+            target = 0.0
+        else:
+            return
+        p.setJointMotorControl2(self.body, finger.joints[k], p.VELOCITY_CONTROL,
+                                targetVelocity=target, force=self.effort * finger.shares[k],
+                                physicsClientId=self.client)
+
+    def settle(self, touching: frozenset[int]) -> None:
+        """The end of closing: the grasp is formed. Every phalanx that closed pushes on the
+        object with exactly its share of τ_c, or holds still where it is (see `_settle`),
+        through the trajectory. `touching`: the links touching the object."""
+        for finger in self.fingers:
+            for k in range(finger.active):
+                self._settle(finger, k, touching, stop_free=True)
+
     def begin_closing(self, speed: float) -> None:
         self.speed = speed
         for finger in self.fingers:
@@ -125,15 +162,20 @@ class Hand:
         states = p.getJointStates(self.body, finger.joints, physicsClientId=self.client)
         return [s[0] for s in states]
 
-    def update_closing(self, stall_tolerance: float) -> bool:
-        """Advances each finger's closing sequence; True once every phalanx has halted."""
+    def update_closing(self, stall_tolerance: float,
+                       touching: frozenset[int] = frozenset()) -> bool:
+        """Advances each finger's closing sequence; True once every phalanx has halted.
+        `touching`: the links touching the object (a halted phalanx among or before them is
+        blocked by it)."""
         all_done = True
         for finger in self.fingers:
             angles = self.finger_angles(finger)
             moved = [abs(a - b) for a, b in zip(angles, finger.last, strict=True)]
             finger.last = angles
             k = finger.active - 1
-            halted = moved[k] < stall_tolerance or angles[k] >= finger.uppers[k] - 1e-3
+            halted = moved[k] < stall_tolerance or angles[k] >= finger.uppers[k] - LIMIT_MARGIN
+            if halted:
+                self._settle(finger, k, touching, stop_free=False)
             if halted and finger.active < len(finger.joints):
                 self._close(finger, finger.active, self.speed)
                 finger.active += 1
