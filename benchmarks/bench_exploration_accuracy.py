@@ -22,6 +22,7 @@ Run: python -m benchmarks.bench_exploration_accuracy [--objects mug cube] [--rol
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import tempfile
@@ -70,10 +71,25 @@ def _spec(object_id: int, rolls: int, variant: str = "plain") -> ExplorationSpec
     )
 
 
+def _simulator_digest() -> str:
+    """A digest of everything a pose's result depends on besides the pose: the simulator's
+    code, the gripper configs and the specs, so a kept dense pass is never reused after any
+    of them changed."""
+    root = Path(__file__).resolve().parent.parent
+    digest = hashlib.sha256()
+    for folder, pattern in (("workers/sim", "*.py"), ("shared/specs", "*.py"),
+                            ("configs/grippers", "*.toml")):
+        for file in sorted((root / folder).rglob(pattern)):
+            digest.update(file.relative_to(root).as_posix().encode())
+            digest.update(file.read_bytes())
+    return digest.hexdigest()[:12]
+
+
 def dense_results(name: str, pool, cache_dir: Path, rolls: int
                   ) -> tuple[dict[str, PoseResult], float]:
-    """Every finest-level pose at `rolls` rolls, simulated once (kept on disk between runs)."""
-    path = cache_dir / f"dense-{name}.jsonl"
+    """Every finest-level pose at `rolls` rolls, simulated once (kept on disk between runs
+    of the same simulator)."""
+    path = cache_dir / f"dense-{name}-{_simulator_digest()}.jsonl"
     lattice = Lattice(_spec(1, rolls).grid, LEVELS)
     poses = [lattice.pose(p) for p in _fine_points(lattice)]
     done: dict[str, PoseResult] = {}
@@ -91,7 +107,7 @@ def dense_results(name: str, pool, cache_dir: Path, rolls: int
                 out.write(r.model_dump_json() + "\n")
             print(f"  dense {name}: {len(done)}/{len(poses)}", flush=True)
     wall = time.perf_counter() - t0
-    meta = cache_dir / f"dense-{name}-{rolls}.wall"
+    meta = path.with_suffix(f".{rolls}.wall")
     if todo:
         previous = float(meta.read_text()) if meta.exists() else 0.0
         meta.write_text(str(previous + wall))
