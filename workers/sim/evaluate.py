@@ -140,6 +140,10 @@ class Evaluator:
     def _reset(self) -> None:
         scene, cid = self.scene, self.client
         p.restoreState(self.pristine, physicsClientId=cid)
+        # A saved state holds no contact cache: the last evaluation's manifolds survive a
+        # restore, and the order in which manifolds were made is the order the solver visits
+        # contacts. A collision pass here, where nothing overlaps, drops them all.
+        p.performCollisionDetection(physicsClientId=cid)
         p.setGravity(0, 0, 0, physicsClientId=cid)
         policy = self.settings.policy
         effort = policy.closing_effort or self.gripper.closing_effort
