@@ -124,14 +124,14 @@ class Hand:
                                 targetVelocity=speed, force=self.effort * finger.shares[k],
                                 physicsClientId=self.client)
 
-    def _settle(self, finger: FingerJoints, k: int, touching: frozenset[int], *,
+    def _settle(self, finger: FingerJoints, k: int, angle: float, touching: frozenset[int], *,
                 stop_free: bool) -> None:
         """A halted phalanx: at its upper limit, it holds still there (the stop takes the
         effort; pushed on, pybullet's limit yields); blocked by the object (it or a phalanx
         beyond it touches), it pushes with its full share of the effort. Otherwise it is
         free: with `stop_free` it holds still, else its closing motor stays on (pushed, it
         would swing on at full effort)."""
-        if self.finger_angles(finger)[k] >= finger.uppers[k] - LIMIT_MARGIN:
+        if angle >= finger.uppers[k] - LIMIT_MARGIN:
             target = 0.0
         elif touching.intersection(finger.joints[k:]):
             target = PUSH_VELOCITY
@@ -148,8 +148,9 @@ class Hand:
         object with exactly its share of τ_c, or holds still where it is (see `_settle`),
         through the trajectory. `touching`: the links touching the object."""
         for finger in self.fingers:
+            angles = self.finger_angles(finger)
             for k in range(finger.active):
-                self._settle(finger, k, touching, stop_free=True)
+                self._settle(finger, k, angles[k], touching, stop_free=True)
 
     def begin_closing(self, speed: float) -> None:
         self.speed = speed
@@ -175,7 +176,7 @@ class Hand:
             k = finger.active - 1
             halted = moved[k] < stall_tolerance or angles[k] >= finger.uppers[k] - LIMIT_MARGIN
             if halted:
-                self._settle(finger, k, touching, stop_free=False)
+                self._settle(finger, k, angles[k], touching, stop_free=False)
             if halted and finger.active < len(finger.joints):
                 self._close(finger, finger.active, self.speed)
                 finger.active += 1
