@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import threading
+from collections.abc import Callable
 from datetime import timedelta
 
 import graspscape.services.coordinator.store.ingest as ingest_module
@@ -340,6 +341,33 @@ def all_but_two_reported(
     return eid, (leased[-2], leased[-1])
 
 
+def run_overlapped(first: Callable[[], None], second: Callable[[], None],
+                   inside: threading.Event, go_on: threading.Event) -> list[BaseException]:
+    """Runs `first` (in a thread named "first") until it sets `inside` with its transaction
+    open, then `second`, which must wait for `first` to commit; then lets `first` go on.
+    Returns what either raised."""
+    errors: list[BaseException] = []
+
+    def guarded(work: Callable[[], None]) -> Callable[[], None]:
+        def run() -> None:
+            try:
+                work()
+            except BaseException as exc:
+                errors.append(exc)
+        return run
+
+    one = threading.Thread(target=guarded(first), name="first")
+    one.start()
+    assert inside.wait(30)
+    two = threading.Thread(target=guarded(second), name="second")
+    two.start()
+    two.join(1.0)  # it waits for the first to commit (row lock, or SQLite's write lock)
+    go_on.set()
+    one.join(60)
+    two.join(60)
+    return errors
+
+
 def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
     sessions: sessionmaker[Session], monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -357,25 +385,13 @@ def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
             go_on.wait(30)
 
     monkeypatch.setattr(ingest_module, "after_ingest", held_open)
-    errors: list[BaseException] = []
 
     def report(t: LeasedTile) -> None:
-        try:
-            with sessions() as s:
-                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
-                               results=fake_results(t.poses(), seed=t.tile_id))
-        except BaseException as exc:
-            errors.append(exc)
+        with sessions() as s:
+            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                           results=fake_results(t.poses(), seed=t.tile_id))
 
-    one = threading.Thread(target=report, args=(first,), name="first")
-    one.start()
-    assert inside.wait(30)
-    two = threading.Thread(target=report, args=(second,), name="second")
-    two.start()
-    two.join(1.0)  # it waits for the first to commit (row lock, or SQLite's write lock)
-    go_on.set()
-    one.join(60)
-    two.join(60)
+    errors = run_overlapped(lambda: report(first), lambda: report(second), inside, go_on)
     assert not errors
     row = exploration_row(sessions, eid)
     assert (row.status, row.poses_done) == ("done", row.poses_total)
@@ -404,32 +420,17 @@ def test_a_failure_and_an_ingest_on_the_last_two_tiles_finish_the_exploration(
         go_on.wait(30)
 
     monkeypatch.setattr(ingest_module, "after_ingest", held_open)
-    errors: list[BaseException] = []
 
     def report() -> None:
-        try:
-            with sessions() as s:
-                ingest_results(s, tile_id=reported.tile_id, lease_epoch=reported.lease_epoch,
-                               worker_id="w", results=fake_results(reported.poses(), seed=1))
-        except BaseException as exc:
-            errors.append(exc)
+        with sessions() as s:
+            ingest_results(s, tile_id=reported.tile_id, lease_epoch=reported.lease_epoch,
+                           worker_id="w", results=fake_results(reported.poses(), seed=1))
 
     def fail() -> None:
-        try:
-            with sessions() as s:
-                fail_tile(s, tile_id=failing.tile_id, lease_epoch=failing.lease_epoch,
-                          error="boom", max_attempts=1)
-        except BaseException as exc:
-            errors.append(exc)
+        with sessions() as s:
+            fail_tile(s, tile_id=failing.tile_id, lease_epoch=failing.lease_epoch,
+                      error="boom", max_attempts=1)
 
-    one = threading.Thread(target=report)
-    one.start()
-    assert inside.wait(30)
-    two = threading.Thread(target=fail)
-    two.start()
-    two.join(1.0)  # it waits for the ingest to commit (row lock, or SQLite's write lock)
-    go_on.set()
-    one.join(60)
-    two.join(60)
+    errors = run_overlapped(report, fail, inside, go_on)
     assert not errors
     assert exploration_row(sessions, eid).status == "done"
