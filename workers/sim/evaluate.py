@@ -77,6 +77,10 @@ class Scene:
     def palm_in_contact(self) -> bool:
         return any(c[3] == -1 for c in self.contacts())
 
+    def touching_links(self) -> frozenset[int]:
+        """Indices of the hand's links that touch the object (the palm is -1)."""
+        return frozenset(c[3] for c in self.contacts())
+
     def contacts(self) -> list:
         # pybullet also reports pairs still apart by up to its breaking threshold; only
         # touching pairs are contacts here.

@@ -9,10 +9,6 @@ from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.shared.specs.sim import BaselinePolicySettings
 
 
-def touching_links(scene) -> frozenset[int]:
-    return frozenset(c[3] for c in scene.contacts())
-
-
 def close_fingers(scene, settings: BaselinePolicySettings,
                   phases: PhaseTimes) -> Outcome | None:
     """Returns NO_GRASP when nothing touches the object once the hand has closed."""
@@ -26,8 +22,8 @@ def close_fingers(scene, settings: BaselinePolicySettings,
         scene.step()
         phases.closing_steps += 1
         if step % settings.check_every_steps == 0 and hand.update_closing(
-                settings.stall_tolerance, touching_links(scene)):
+                settings.stall_tolerance, scene.touching_links()):
             break
-    hand.settle(touching_links(scene))
+    hand.settle(scene.touching_links())
     phases.closing_s = time.perf_counter() - started
     return None if scene.in_contact() else Outcome.NO_GRASP
