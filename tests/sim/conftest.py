@@ -43,3 +43,8 @@ def sphere_evaluator(make_evaluator) -> Evaluator:
 @pytest.fixture(scope="session")
 def mug_evaluator(make_evaluator) -> Evaluator:
     return make_evaluator("mug")
+
+
+@pytest.fixture(scope="session")
+def cube_evaluator(make_evaluator) -> Evaluator:
+    return make_evaluator("cube")

@@ -27,6 +27,22 @@ def test_sphere_approached_from_any_side_is_held(sphere_evaluator, theta, phi):
     assert result.effort_max_nm > 0.0
 
 
+# Face-on, 30° off a face from touching distance, over an edge, over a corner.
+CUBE_SIDES = [(0.0, 0.0, 0.02), (math.radians(30), 0.0, 0.0), (math.pi / 4, 0.0, 0.01),
+              (math.acos(1 / math.sqrt(3)), math.pi / 4, 0.01)]
+
+
+@pytest.mark.parametrize(("theta", "phi", "r"), CUBE_SIDES)
+def test_a_cube_in_the_three_finger_hand_is_held_from_face_edge_and_corner(
+        cube_evaluator, theta, phi, r):
+    # A 6 cm, 250 g cube fits the hand from every side. 30° off a face the fixture holds the
+    # cube ~4 cm off the palm while the fingers close; released, the closing effort draws it
+    # into the palm, where it comes to rest: the grasp taking the weight, not a drop.
+    result = cube_evaluator.evaluate(Pose(theta=theta, phi=phi, r=r))
+    assert result.outcome is Outcome.HELD
+    assert 0.0 < result.mu_s <= 1.0
+
+
 def test_palm_facing_away_grasps_nothing(sphere_evaluator):
     result = sphere_evaluator.evaluate(Pose(theta=math.pi / 2, phi=0.0, r=0.02, pitch=math.pi))
     assert not result.viable

@@ -252,15 +252,18 @@ class Evaluator:
         p.changeConstraint(scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
         p.setGravity(0, 0, -spec.gravity_m_s2, physicsClientId=cid)
         start_pos, start_rot = hand.frame_pose()
-        obj_pos, obj_rot = scene.object_pose()
-        rel_pos0 = start_rot.T @ (obj_pos - start_pos)
-        rel_rot0 = start_rot.T @ obj_rot
         dt = scene.dt
         scene.drive_to(start_pos, start_rot)
         for _ in range(round(spec.settle_s / dt)):
             scene.step()
             phases.trajectory_steps += 1
-        pivot = scene.object_pose()[0]
+        # Slip is measured from where the object came to rest in the hand, not from where
+        # the fixture held it: released, an enveloped object is drawn into the palm by the
+        # closing effort (centimetres), and that is the grasp taking the weight, not a drop.
+        obj_pos, obj_rot = scene.object_pose()
+        rel_pos0 = start_rot.T @ (obj_pos - start_pos)
+        rel_rot0 = start_rot.T @ obj_rot
+        pivot = obj_pos
         n_steps = max(1, round(spec.duration_s / dt))
         instants = {min(n_steps - 1, int((k + 0.5) * n_steps / metric.instants))
                     for k in range(metric.instants)}
@@ -286,7 +289,7 @@ class Evaluator:
             return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
 
         effort = 0.0
-        held = not slipped()
+        held = scene.in_contact()  # a dropped object has fallen ~5 cm by now, off the hand
         # States at the sampled instants; they are probed only once the grasp has held to the
         # end (a probe restores what it found, so deferring it changes nothing but the cost).
         # The trajectory is not used as the probes' unperturbed rollout: it carries the
