@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-_LINK = re.compile(r"^([A-Za-z]+)_\d+$")
+_LINK = re.compile(r"^([A-Za-z]+)_(?:\d+|spread|pad)$")
 SLIDE_FACTOR = 1.5
 SLACK_M = 0.005
 # Same grasp type between neighbours: every digit's mean joint angle within 0.25 rad.
@@ -28,6 +28,8 @@ JOINT_TOLERANCE_RAD = 0.25
 
 
 def digit(link: str) -> str:
+    """The finger a link belongs to ("B_2" and the scissor base "B_spread" → "B"), or the
+    link itself ("palm")."""
     match = _LINK.match(link)
     return match.group(1) if match else link
 
