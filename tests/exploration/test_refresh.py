@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 from graspscape.services.coordinator.exploration.local_run import run_local
@@ -42,5 +43,5 @@ def test_manifolds_refresh_while_exploring_in_steps_that_grow(sessions, named_ob
     # ... but not every few tiles: a quarter more poses between refreshes, besides the one
     # each local-search round makes (dozens of 4-pose tiles finish here).
     growing = sorted(set(during))
-    steps = sum(1 for a, b in zip(growing, growing[1:], strict=False) if b < 1.25 * a)
+    steps = sum(1 for a, b in itertools.pairwise(growing) if b < 1.25 * a)
     assert steps <= spec.refinement.local_search_rounds
