@@ -172,21 +172,26 @@ def refresh_manifolds(
     return mmap
 
 
+def _last_refresh(session: Session, exploration_id: int) -> dict | None:
+    """What the last refresh stamped on the stored manifolds ("poses_done", "final"), or
+    None where none is stored (never refreshed, or nothing viable then)."""
+    first = session.scalars(
+        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id).limit(1)
+    ).first()
+    return first.summary if first is not None else None
+
+
 def ensure_manifolds(session: Session, exploration_id: int) -> None:
     """Bring the stored manifolds up to date with the stored poses (commits if it had to)."""
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
-    first = session.scalars(
-        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id).limit(1)
-    ).first()
+    last = _last_refresh(session, exploration_id)
     done = row.status in (ExplorationStatus.DONE, ExplorationStatus.CANCELLED)
-    if first is not None and first.summary is not None:
-        if first.summary.get("poses_done") == row.poses_done and (
-            first.summary.get("final") or not done
-        ):
+    if last is not None:
+        if last.get("poses_done") == row.poses_done and (last.get("final") or not done):
             return
-    elif first is None and row.poses_done == 0:
+    elif row.poses_done == 0:
         return
     refresh_manifolds(session, exploration_id, final=done)
     session.commit()
@@ -199,10 +204,7 @@ def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         return
-    first = session.scalars(
-        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id).limit(1)
-    ).first()
-    refreshed_at = (first.summary or {}).get("poses_done") if first is not None else None
+    refreshed_at = (_last_refresh(session, exploration_id) or {}).get("poses_done")
     if refreshed_at:
         due = row.poses_done >= refreshed_at * (1.0 + REFRESH_GROWTH)
     else:  # nothing stored yet (or no viable pose last time): count finished tiles
