@@ -14,7 +14,9 @@ The dense grid is simulated once per object, at 8 rolls (whose attitudes include
 2 and 4 rolls), and every adaptive run reads its evaluations from it: an evaluation is a pure
 function of pose, object, gripper and settings, so this is what the adaptive run would have
 computed, and it keeps the whole benchmark within ~30 min on 2 cores. Each configuration is
-run plain, with the normal-reuse shortcut, and with the symmetry shortcut.
+run plain, with each shortcut alone, and with all of them. All runs of one object, and its
+dense grid, share the lattice that the symmetry shortcut gives the object (ring azimuth
+counts a multiple of its symmetry order: 4 for the cube, 1 for the mug).
 
 Run: python -m benchmarks.bench_exploration_accuracy [--objects mug cube] [--rolls 1 2 4 8]
 """
@@ -62,10 +64,20 @@ VARIANTS = {  # shortcuts switched on, measured one at a time, then all together
 }
 
 
-def _spec(object_id: int, rolls: int, variant: str = "plain") -> ExplorationSpec:
+def azimuth_multiple_of(name: str) -> int:
+    """The lattice's azimuth multiple that the symmetry shortcut gives this object; every
+    variant, and the dense grid, use it, so that all of them share one lattice."""
+    from graspscape.services.coordinator.exploration import symmetry
+    from graspscape.services.coordinator.manifolds.service import _mesh_for
+
+    mesh = _mesh_for(ObjectSpec(name=name).model_dump_json())
+    return symmetry.azimuth_multiple(symmetry.detect(mesh))
+
+
+def _spec(object_id: int, rolls: int, multiple: int, variant: str = "plain") -> ExplorationSpec:
     return ExplorationSpec(
         object_id=object_id, label="accuracy",
-        grid={**GRID, "attitudes": {"rolls": rolls}},
+        grid={**GRID, "attitudes": {"rolls": rolls}, "azimuth_multiple": multiple},
         refinement={"levels": LEVELS, "local_search_rounds": 2},
         shortcuts=VARIANTS[variant],
     )
@@ -85,12 +97,12 @@ def _simulator_digest() -> str:
     return digest.hexdigest()[:12]
 
 
-def dense_results(name: str, pool, cache_dir: Path, rolls: int
+def dense_results(name: str, pool, cache_dir: Path, rolls: int, multiple: int
                   ) -> tuple[dict[str, PoseResult], float]:
     """Every finest-level pose at `rolls` rolls, simulated once (kept on disk between runs
     of the same simulator)."""
-    path = cache_dir / f"dense-{name}-{_simulator_digest()}.jsonl"
-    lattice = Lattice(_spec(1, rolls).grid, LEVELS)
+    path = cache_dir / f"dense-{name}-q{multiple}-{_simulator_digest()}.jsonl"
+    lattice = Lattice(_spec(1, rolls, multiple).grid, LEVELS)
     poses = [lattice.pose(p) for p in _fine_points(lattice)]
     done: dict[str, PoseResult] = {}
     if path.exists():
@@ -175,14 +187,14 @@ def with_configuration_inference(results: list[PoseResult], match) -> list[PoseR
     return out
 
 
-def run_config(name: str, rolls: int, variant: str, dense: dict[str, PoseResult],
-               radius) -> dict[str, float]:
+def run_config(name: str, rolls: int, multiple: int, variant: str,
+               dense: dict[str, PoseResult], radius) -> dict[str, float]:
     url = f"sqlite:///{tempfile.mkdtemp()}/bench.db"
     db.upgrade(url)
     sessions = db.make_sessionmaker(db.make_engine(url))
     with sessions() as s:
         obj, _ = create_named(s, name=name, properties={}, shared_dir=None)
-        spec = _spec(obj.id, rolls, variant)
+        spec = _spec(obj.id, rolls, multiple, variant)
         eid = create_exploration(s, spec=spec, tile_target_poses=60, max_poses=10**7).id
 
     def evaluate(poses, match=None):
@@ -244,6 +256,7 @@ def main() -> None:
     figures: dict[str, float] = {}
     table: list[dict] = []
     dense_walls: dict[str, float] = {}
+    multiples: dict[str, int] = {}
     previous = RESULTS_DIR / "exploration_accuracy.json"
     if args.merge and previous.exists():
         # Keep the rows of configurations this invocation does not recompute.
@@ -253,15 +266,17 @@ def main() -> None:
         figures = {k: v for k, v in old.get("figures", {}).items()
                    if (k.split(".")[0], int(k.split(".")[1].removeprefix("rolls"))) not in redo}
         dense_walls = old.get("dense_wall_s_at_most_rolls", {})
+        multiples = dict(old.get("setup", {}).get("azimuth_multiple", {}))
     with ProcessPoolExecutor(PROCESSES) as pool:
         for name in args.objects:
             top = max(args.rolls)
-            dense, dense_wall = dense_results(name, pool, args.cache, top)
+            multiples[name] = multiple = azimuth_multiple_of(name)
+            dense, dense_wall = dense_results(name, pool, args.cache, top, multiple)
             dense_walls[name] = round(dense_wall, 1)
             radius = radius_function(_mesh_for(ObjectSpec(name=name).model_dump_json()))
             for rolls in args.rolls:
                 for variant in VARIANTS:
-                    row = run_config(name, rolls, variant, dense, radius)
+                    row = run_config(name, rolls, multiple, variant, dense, radius)
                     # the dense pass at r rolls is the 8-roll pass's share of its attitudes
                     # Both estimates on one footing: measured CPU seconds over 2 processes
                     # (+ the adaptive run's measured store and decision time).
@@ -276,7 +291,8 @@ def main() -> None:
                     write_results("exploration_accuracy", figures, {
                         "setup": {"grid": GRID, "refinement_levels": LEVELS,
                                   "finest_step_deg": 15.0, "finest_dr_m": 0.005,
-                                  "processes": PROCESSES, "gripper": "robotiq_3f"},
+                                  "processes": PROCESSES, "gripper": "robotiq_3f",
+                                  "azimuth_multiple": multiples},
                         "dense_pass_wall_s_this_invocation": dense_walls,
                         "note": "the dense grid is simulated once per object (kept between "
                         "invocations); each configuration reads its attitudes from it. Times: "

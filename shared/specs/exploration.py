@@ -71,6 +71,17 @@ class PoseGridSpec(BaseModel):
     r_max: float = Field(default=0.05, ge=0.0, le=0.5, description="largest start gap, m")
     dr: float = Field(default=0.01, ge=0.001, le=0.5, description="step between r levels, m")
     attitudes: AttitudeSpec = Field(default_factory=AttitudeSpec)
+    azimuth_multiple: int | None = Field(
+        default=None,
+        ge=1,
+        le=16,
+        description=(
+            "every ring's azimuth count is rounded to a multiple of this, so that the rings map "
+            "onto themselves under the object's rotations and mirrors about its z axis; unset: "
+            "decided at submission (the object's symmetry order when the symmetry shortcut is "
+            "on, else 1)"
+        ),
+    )
 
     @model_validator(mode="after")
     def _r_range(self) -> PoseGridSpec:

@@ -35,12 +35,27 @@ def test_tiles_stay_near_the_target_size() -> None:
 
 def test_neighbouring_directions_are_about_dtheta_apart() -> None:
     dtheta = 0.2
-    for ring in rings(dtheta)[1:-1]:
+    grid = PoseGridSpec(dtheta=dtheta)
+    for ring in rings(grid)[1:-1]:
         theta = ring[0][0]
         step = 2 * math.pi / len(ring) * math.sin(theta)  # arc between azimuth neighbours
         assert 0.6 * dtheta < step < 1.5 * dtheta
-    assert len(rings(dtheta)[0]) == len(rings(dtheta)[-1]) == 1  # one point at each pole
-    assert rings(dtheta)[-1][0][0] == math.pi
+    assert len(rings(grid)[0]) == len(rings(grid)[-1]) == 1  # one point at each pole
+    assert rings(grid)[-1][0][0] == math.pi
+
+
+@pytest.mark.parametrize("multiple", [2, 4, 8])
+def test_an_azimuth_multiple_makes_every_ring_a_multiple_and_keeps_cells_about_dtheta(
+    multiple: int,
+) -> None:
+    dtheta = 0.2
+    grid = PoseGridSpec(dtheta=dtheta, azimuth_multiple=multiple)
+    for ring in rings(grid)[1:-1]:
+        assert len(ring) % multiple == 0
+        ring_step = math.pi / round(math.pi / dtheta)  # Δθ as the rings divide [0, π]
+        equal_area_count = 2 * math.pi * math.sin(ring[0][0]) / ring_step
+        assert abs(len(ring) - equal_area_count) <= multiple / 2
+    assert len(rings(grid)[0]) == len(rings(grid)[-1]) == 1
 
 
 def test_grid_levels_and_attitudes() -> None:

@@ -90,7 +90,42 @@ def plan_coarse(
     return group_tiles([lattice.pose(p) for p in points], target_poses=target_poses)
 
 
-_ORBITS: dict[tuple[str, int], Orbits | None] = {}
+_DETECTED: dict[int, tuple[Any, list[symmetry.Symmetry]]] = {}
+_ORBITS: dict[tuple[str, tuple[symmetry.Symmetry, ...]], Orbits] = {}
+
+
+def object_symmetries(session: Session, spec: ExplorationSpec) -> list[symmetry.Symmetry]:
+    """The symmetries of the exploration's object that the task keeps: rotations about z and
+    vertical mirrors (mirrors only for a mirror-symmetric gripper); none where the mesh is
+    unavailable."""
+    from graspscape.services.coordinator.manifolds.service import object_mesh
+    from graspscape.shared.specs.gripper import load_gripper
+
+    mesh = object_mesh(session, spec.object_id)
+    if mesh is None:
+        return []
+    # object_mesh caches one mesh per object spec; keyed by identity, the entry keeps the
+    # mesh alive so its id is never reused for another object.
+    if id(mesh) not in _DETECTED:
+        _DETECTED[id(mesh)] = (mesh, symmetry.detect(mesh))
+    # z → −z is a symmetry of some objects but never of the task: gravity and the lift act
+    # along z, and a grasp from below is not the mirror image of one from above.
+    found = [s for s in _DETECTED[id(mesh)][1] if s.kind != "mirror_z"]
+    if symmetry.hand_mirror(load_gripper(spec.gripper)) is None:
+        found = [s for s in found if not s.reflects]
+    return found
+
+
+def resolve_grid(session: Session, spec: ExplorationSpec) -> ExplorationSpec:
+    """The spec with its lattice's azimuth multiple decided (`PoseGridSpec.azimuth_multiple`):
+    as given, else the object's symmetry order when the symmetry shortcut is on, else 1."""
+    if spec.grid.azimuth_multiple is not None:
+        return spec
+    multiple = 1
+    if spec.shortcuts.symmetry:
+        multiple = symmetry.azimuth_multiple(object_symmetries(session, spec))
+    grid = spec.grid.model_copy(update={"azimuth_multiple": multiple})
+    return spec.model_copy(update={"grid": grid})
 
 
 def symmetry_orbits(session: Session | None, spec: ExplorationSpec) -> Orbits | None:
@@ -98,16 +133,12 @@ def symmetry_orbits(session: Session | None, spec: ExplorationSpec) -> Orbits | 
     or None when the shortcut is off or the object has no usable symmetry."""
     if session is None or not spec.shortcuts.symmetry:
         return None
-    key = (spec.model_dump_json(), spec.object_id)
+    found = tuple(object_symmetries(session, spec))
+    if not found:
+        return None
+    key = (spec.model_dump_json(), found)
     if key not in _ORBITS:
-        from graspscape.services.coordinator.manifolds.service import object_mesh
-        from graspscape.shared.specs.gripper import load_gripper
-
-        mesh = object_mesh(session, spec.object_id)
-        found = symmetry.detect(mesh) if mesh is not None else []
-        if symmetry.hand_mirror(load_gripper(spec.gripper)) is None:
-            found = [s for s in found if not s.reflects]
-        _ORBITS[key] = symmetry.Orbits(lattice_of(spec), found) if found else None
+        _ORBITS[key] = symmetry.Orbits(lattice_of(spec), list(found))
     return _ORBITS[key]
 
 

@@ -8,9 +8,12 @@ Equal area. Level L has N_L = n·2^L + 1 rings θ_k = k·π/(n·2^L) (n = round(
 born at the first level where it exists; at its birth level b it gets
 m_b = max(1, round(2π·sin θ / Δθ_b)) evenly spaced azimuths, so its cells span about Δθ_b in
 both directions and every cell of the sphere covers about Δθ_b² steradians (a band of area
-2π·sin θ·Δθ cut into pieces ∝ sin θ): no pile-up of cells at the poles. At each finer level
-the ring's azimuth count doubles, which keeps the nesting. The poles are one point each at
-every level.
+2π·sin θ·Δθ cut into pieces ∝ sin θ): no pile-up of cells at the poles. With an azimuth
+multiple q > 1 (`PoseGridSpec.azimuth_multiple`), m_b is rounded to the nearest multiple of
+q (at least q), so every ring maps onto itself under rotations about z by 2π/q and mirrors in
+vertical planes at multiples of π/q — the symmetry shortcut can use only the symmetries the
+lattice itself has. At each finer level the ring's azimuth count doubles, which keeps the
+nesting. The poles are one point each at every level.
 
 Points are stored as integers at the finest level D (the refinement depth): K (ring), J
 (azimuth index on ring K at level D), I (r index in steps of Δr/2^D), a (attitude index).
@@ -58,6 +61,10 @@ class Lattice:
         return max(1, round(math.pi / self.grid.dtheta))
 
     @cached_property
+    def azimuth_multiple(self) -> int:
+        return self.grid.azimuth_multiple or 1
+
+    @cached_property
     def n_rings(self) -> int:  # rings at the finest level are 0 … n_rings
         return self.n << self.depth
 
@@ -92,10 +99,11 @@ class Lattice:
     @cached_property
     def _m_birth(self) -> list[int]:
         """Azimuths of every ring at its birth level (1 at the poles)."""
+        q = self.azimuth_multiple
         out = []
         for K in range(self.n_rings + 1):
             b = self.ring_birth(K)
-            m_b = max(1, round(TWO_PI * math.sin(self.theta(K)) / self.dtheta(b)))
+            m_b = q * max(1, round(TWO_PI * math.sin(self.theta(K)) / self.dtheta(b) / q))
             out.append(1 if self.is_pole(K) else m_b)
         return out
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime, timedelta
 
 from graspscape.services.coordinator.errors import Conflict, InvalidInput, NotFound
-from graspscape.services.coordinator.exploration.adaptive import plan_coarse
+from graspscape.services.coordinator.exploration.adaptive import plan_coarse, resolve_grid
 from graspscape.services.coordinator.exploration.schemas import PoseFilter, Progress
 from graspscape.services.coordinator.exploration.tiling import count_poses
 from graspscape.services.coordinator.store.base import utcnow
@@ -34,6 +34,7 @@ def create_exploration(
             f"object_id {spec.object_id} does not exist; upload it to /objects",
             loc=("body", "object_id"),
         )
+    spec = resolve_grid(session, spec)
     poses_total = count_poses(spec.grid)
     if poses_total > max_poses:
         raise InvalidInput(

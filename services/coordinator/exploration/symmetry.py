@@ -87,6 +87,27 @@ def detect(mesh: Any, *, samples: int = 800, seed: int = 0) -> list[Symmetry]:
     return found
 
 
+LATTICE_MULTIPLES = (1, 2, 4, 8)
+
+
+def lattice_multiple(sym: Symmetry) -> int:
+    """The azimuth multiple q a ring needs to map onto itself under `sym`: k for a rotation by
+    2π/k, 8/gcd(j, 8) for a mirror at azimuth j·π/8, 1 for z → −z."""
+    if sym.kind == "rot_z":
+        return round(TWO_PI / sym.angle)
+    if sym.kind == "mirror_v":
+        return 8 // math.gcd(round(sym.angle * 8 / math.pi), 8)
+    return 1
+
+
+def azimuth_multiple(symmetries: list[Symmetry]) -> int:
+    """The lattice's azimuth multiple for an object with these symmetries: the largest one a
+    symmetry needs among 1, 2, 4 and 8 (the orders that survive the lattice's doubling of
+    azimuths per level; a 3-fold symmetry is not used)."""
+    needs = [lattice_multiple(s) for s in symmetries]
+    return max([q for q in needs if q in LATTICE_MULTIPLES], default=1)
+
+
 @dataclass(frozen=True)
 class HandMirror:
     """How a mirror-symmetric gripper's links and joints trade places under a reflection."""

@@ -34,9 +34,9 @@ class TilePlan:
         return len(self.cells) * len(self.r_levels) * len(self.attitudes)
 
 
-def rings(dtheta: float) -> list[list[Cell]]:
+def rings(grid: PoseGridSpec) -> list[list[Cell]]:
     """The coarse grid's approach directions, ring by ring from θ = 0 to θ = π."""
-    lattice = Lattice(PoseGridSpec(dtheta=dtheta))
+    lattice = Lattice(grid)
     out: list[list[Cell]] = []
     for K, J in lattice.cells(0):
         cell = (lattice.theta(K), 0.0 if lattice.is_pole(K) else J * 2 * math.pi / lattice.m(K))
@@ -58,7 +58,7 @@ def coarse_tiles(grid: PoseGridSpec, *, target_poses: int = 100) -> list[TilePla
     attitudes = grid.attitudes.attitudes()
     per_tile = cells_per_tile_for(grid, target_poses)
     tiles: list[TilePlan] = []
-    for ring in rings(grid.dtheta):
+    for ring in rings(grid):
         sectors = math.ceil(len(ring) / per_tile)
         # Even sector sizes (differing by at most one) rather than a short last sector.
         bounds = [round(k * len(ring) / sectors) for k in range(sectors + 1)]
@@ -68,7 +68,7 @@ def coarse_tiles(grid: PoseGridSpec, *, target_poses: int = 100) -> list[TilePla
 
 
 def count_poses(grid: PoseGridSpec) -> int:
-    cells = sum(len(ring) for ring in rings(grid.dtheta))
+    cells = sum(len(ring) for ring in rings(grid))
     return cells * len(grid.r_levels()) * len(grid.attitudes.attitudes())
 
 
