@@ -192,6 +192,27 @@ def test_symmetry_detected_from_the_mesh() -> None:
     assert hand_mirror(load_gripper("robotiq_3f")).fingers == {"A": "A", "B": "C", "C": "B"}
 
 
+@pytest.mark.parametrize(("name", "symmetry", "given", "stored"), [
+    ("cube", False, None, 1),  # a plain run keeps the equal-area lattice
+    ("cube", True, None, 4),  # 90° turns and mirrors at 45°
+    ("sphere", True, None, 8),  # every candidate: 8 is the largest order used
+    ("mug", True, None, 1),  # one mirror, in the handle's plane at φ = 0
+    ("cube", True, 2, 2),  # as given
+])
+def test_the_lattice_multiple_is_decided_at_submission_from_the_objects_symmetry(
+        sessions, named_object, name: str, symmetry: bool, given: int | None,
+        stored: int) -> None:
+    spec = ExplorationSpec(
+        object_id=named_object(name),
+        grid={"dtheta": math.radians(30), "r_min": 0.01, "r_max": 0.01,
+              "azimuth_multiple": given},
+        shortcuts={"symmetry": symmetry},
+    )
+    with sessions() as s:
+        row = create_exploration(s, spec=spec, tile_target_poses=16, max_poses=10**6)
+        assert row.spec["grid"]["azimuth_multiple"] == stored
+
+
 def test_symmetry_shortcut_mirrors_the_cube(sessions, named_object, pool) -> None:
     spec = ExplorationSpec(
         object_id=named_object("cube"),
