@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import Outcome
 from graspscape.shared.specs.sim import BaselinePolicySettings, SimSettings
 from graspscape.workers.sim.effort import minimum_closing_effort, search_closing_effort
 from graspscape.workers.sim.grasp_metrics import (
@@ -119,10 +120,10 @@ def test_simulated_sphere_grasp_carries_its_static_metrics(sphere_evaluator):
 
 
 def test_pose_without_grasp_has_no_static_metrics(mug_evaluator):
-    # Above the rim on the side away from the handle, the open fingers would sit inside the
-    # mug from every start gap up to the back-off limit: no grasp, so no contacts to score.
-    result = mug_evaluator.evaluate(Pose(theta=0.5, phi=math.pi, r=0.02))
-    assert result.signature is None
+    # Below the side away from the handle, the hand closes without anything between its
+    # fingers: no grasp, so no contacts to score.
+    result = mug_evaluator.evaluate(Pose(theta=2.09, phi=math.pi, r=0.02))
+    assert result.outcome == Outcome.NO_GRASP and result.signature is None
     assert result.mu_g is None and result.mu_f is None and result.mu_m is None
 
 

@@ -5,7 +5,10 @@ lies on the ray from the centre of mass along direction (θ, φ), at the outermo
 ray whose distance to the object surface is r. The palm normal points at the nearest surface
 point x_c (so it is aligned with the surface normal there). Roll turns the gripper about its
 palm normal from a reference attitude in which the two-finger side (-x of the gripper frame)
-faces the object's +z ("up"), as in the paper's Fig. 2; pitch and yaw then tilt the palm normal.
+faces the object's +z ("up"), as in the paper's Fig. 2 (where the palm faces straight up or
+down, the same rule applied to the approach direction); pitch and yaw then tilt the palm
+normal. Every choice is equivariant under rotations about z and vertical mirrors, so an
+object's symmetries are symmetries of the start poses.
 """
 
 from __future__ import annotations
@@ -59,12 +62,22 @@ def point_at_gap(mesh: trimesh.Trimesh, u: np.ndarray, gap: float,
     return rho * u
 
 
-def _reference_rotation(z: np.ndarray) -> np.ndarray:
+def _reference_rotation(z: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Gripper axes for palm normal z, approached from direction u (unit vectors)."""
     up = np.array([0.0, 0.0, 1.0])
     x = -(up - up.dot(z) * z)  # two-finger side (−x) toward +z
-    if np.linalg.norm(x) < 1e-6:  # approaching along ±z: fall back to the object's x axis
-        ex = np.array([1.0, 0.0, 0.0])
-        x = ex - ex.dot(z) * z
+    if np.linalg.norm(x) < 1e-6:
+        # The palm faces straight up or down (a flat top or bottom): "toward +z" is no
+        # direction. Take the same rule for the approach direction u instead (the limit of
+        # the rule on a sphere as θ → 0 or π: two-finger side toward the z axis above, away
+        # from it below), so the attitude turns with φ and the map keeps the object's
+        # symmetries about z. Only on the z axis itself (θ = 0 or π) is the object's x axis
+        # the reference.
+        x = -(up - up.dot(u) * u)
+        x = x - x.dot(z) * z
+        if np.linalg.norm(x) < 1e-6:
+            ex = np.array([1.0, 0.0, 0.0])
+            x = ex - ex.dot(z) * z
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     return np.column_stack([x, y, z])
@@ -79,7 +92,7 @@ def place_gripper(mesh: trimesh.Trimesh, pose: Pose) -> Placement:
     else:  # touching: use the face normal there
         _, _, face = trimesh.proximity.closest_point(mesh, position[None, :])
         normal = mesh.face_normals[face[0]]
-    base = _reference_rotation(-normal)
+    base = _reference_rotation(-normal, u)
     # Attitude: roll about the palm normal, then pitch (about gripper y) and yaw (about x).
     attitude = Rotation.from_euler("ZYX", [pose.roll, pose.pitch, pose.yaw]).as_matrix()
     rotation = base @ attitude
