@@ -71,9 +71,11 @@ def azimuth_multiple_of(name: str) -> int:
     variant, and the dense grid, use it, so that all of them share one lattice."""
     from graspscape.services.coordinator.exploration import symmetry
     from graspscape.services.coordinator.manifolds.service import _mesh_for
+    from graspscape.shared.specs.gripper import load_gripper
 
     mesh = _mesh_for(ObjectSpec(name=name).model_dump_json())
-    return symmetry.azimuth_multiple(symmetry.detect(mesh))
+    usable = symmetry.task_symmetries(symmetry.detect(mesh), load_gripper("robotiq_3f"))
+    return symmetry.azimuth_multiple(usable)
 
 
 def _spec(object_id: int, rolls: int, multiple: int, variant: str = "plain") -> ExplorationSpec:
@@ -149,6 +151,13 @@ class _Row:
         self.grasp = r.grasp.model_dump(mode="json") if r.grasp else None
 
 
+def agreement_of(lattice, reference, other) -> tuple[float, float]:
+    """`agreement` of two maps' fine labels over the same lattice (points in any order)."""
+    index = {p: i for i, p in enumerate(other.points)}
+    order = np.array([index[p] for p in reference.points])
+    return agreement(lattice, reference.labels, other.labels[order], reference.weights)
+
+
 def agreement(lattice, dense_labels, adaptive_labels, weights) -> tuple[float, float]:
     """(manifold IoU, viable IoU) by volume over the finest lattice."""
     either = (dense_labels >= 0) | (adaptive_labels >= 0)
@@ -215,11 +224,7 @@ def run_config(name: str, rolls: int, multiple: int, variant: str,
     fine_pts = _fine_points(lattice)
     dense_samples = {p: Sample.from_row(_Row(dense[lattice.pose(p).key()])) for p in fine_pts}
     dense_map, dense_fine, _ = build_map(lattice, dense_samples, radius)
-    adaptive_fine = computed.fine
-    index = {p: i for i, p in enumerate(adaptive_fine.points)}
-    order = np.array([index[p] for p in dense_fine.points])
-    iou, viable_iou = agreement(lattice, dense_fine.labels, adaptive_fine.labels[order],
-                                dense_fine.weights)
+    iou, viable_iou = agreement_of(lattice, dense_fine, computed.fine)
     # A pose that reused a matching grasp's outcome (shortcut 2) was simulated up to its
     # synthesized grasp: it costs that part only, and counts as an evaluation.
     cpu = sum(dense[k].eval_time_s - (dense[k].phases.trajectory_s
@@ -279,10 +284,7 @@ def reproducibility(name: str, pool, multiple: int, dense: dict[str, PoseResult]
     for source in (dense, moved):
         samples = {p: Sample.from_row(_Row(source[lattice.pose(p).key()])) for p in points}
         maps.append(build_map(lattice, samples, radius)[1])
-    reference, other = maps
-    index = {p: i for i, p in enumerate(other.points)}
-    order = np.array([index[p] for p in reference.points])
-    return agreement(lattice, reference.labels, other.labels[order], reference.weights)
+    return agreement_of(lattice, *maps)
 
 
 def main() -> None:

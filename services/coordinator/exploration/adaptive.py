@@ -108,12 +108,7 @@ def object_symmetries(session: Session, spec: ExplorationSpec) -> list[symmetry.
     # mesh alive so its id is never reused for another object.
     if id(mesh) not in _DETECTED:
         _DETECTED[id(mesh)] = (mesh, symmetry.detect(mesh))
-    # z → −z is a symmetry of some objects but never of the task: gravity and the lift act
-    # along z, and a grasp from below is not the mirror image of one from above.
-    found = [s for s in _DETECTED[id(mesh)][1] if s.kind != "mirror_z"]
-    if symmetry.hand_mirror(load_gripper(spec.gripper)) is None:
-        found = [s for s in found if not s.reflects]
-    return found
+    return symmetry.task_symmetries(_DETECTED[id(mesh)][1], load_gripper(spec.gripper))
 
 
 def resolve_grid(session: Session, spec: ExplorationSpec) -> ExplorationSpec:

@@ -87,6 +87,16 @@ def detect(mesh: Any, *, samples: int = 800, seed: int = 0) -> list[Symmetry]:
     return found
 
 
+def task_symmetries(found: list[Symmetry], gripper: GripperSpec) -> list[Symmetry]:
+    """The object's symmetries that the grasping task keeps: z → −z never (gravity and the
+    lift act along z, so a grasp from below is not the mirror image of one from above), and
+    mirrors only for a gripper that is itself mirror-symmetric."""
+    kept = [s for s in found if s.kind != "mirror_z"]
+    if hand_mirror(gripper) is None:
+        kept = [s for s in kept if not s.reflects]
+    return kept
+
+
 LATTICE_MULTIPLES = (1, 2, 4, 8)
 
 
