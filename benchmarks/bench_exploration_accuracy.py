@@ -21,6 +21,7 @@ dense grid, share the lattice that the symmetry shortcut gives the object (ring 
 counts a multiple of its symmetry order: 4 for the cube, 1 for the mug).
 
 Run: python -m benchmarks.bench_exploration_accuracy [--objects mug cube] [--rolls 1 2 4 8]
+     [--levels 2]  (a second depth: finest 7.5° and 0.25 cm, its own results file)
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from sqlalchemy import select
 from benchmarks._results import RESULTS_DIR, write_results
 
 GRID = {"dtheta": math.radians(30), "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
-LEVELS = 1
+LEVELS = 1  # the default depth; --levels 2 writes exploration_accuracy_levels2.json
 PROCESSES = 2
 
 
@@ -78,11 +79,12 @@ def azimuth_multiple_of(name: str) -> int:
     return symmetry.azimuth_multiple(usable)
 
 
-def _spec(object_id: int, rolls: int, multiple: int, variant: str = "plain") -> ExplorationSpec:
+def _spec(object_id: int, rolls: int, multiple: int, variant: str = "plain",
+          levels: int = LEVELS) -> ExplorationSpec:
     return ExplorationSpec(
         object_id=object_id, label="accuracy",
         grid={**GRID, "attitudes": {"rolls": rolls}, "azimuth_multiple": multiple},
-        refinement={"levels": LEVELS, "local_search_rounds": 2},
+        refinement={"levels": levels, "local_search_rounds": 2},
         shortcuts=VARIANTS[variant],
     )
 
@@ -101,12 +103,13 @@ def _simulator_digest() -> str:
     return digest.hexdigest()[:12]
 
 
-def dense_results(name: str, pool, cache_dir: Path, rolls: int, multiple: int
-                  ) -> tuple[dict[str, PoseResult], float]:
+def dense_results(name: str, pool, cache_dir: Path, rolls: int, multiple: int,
+                  levels: int = LEVELS) -> tuple[dict[str, PoseResult], float]:
     """Every finest-level pose at `rolls` rolls, simulated once (kept on disk between runs
     of the same simulator)."""
-    path = cache_dir / f"dense-{name}-q{multiple}-{_simulator_digest()}.jsonl"
-    lattice = Lattice(_spec(1, rolls, multiple).grid, LEVELS)
+    depth = "" if levels == LEVELS else f"-l{levels}"
+    path = cache_dir / f"dense-{name}-q{multiple}{depth}-{_simulator_digest()}.jsonl"
+    lattice = Lattice(_spec(1, rolls, multiple).grid, levels)
     poses = [lattice.pose(p) for p in _fine_points(lattice)]
     done: dict[str, PoseResult] = {}
     if path.exists():
@@ -178,6 +181,33 @@ def agreement(lattice, dense_labels, adaptive_labels, weights) -> tuple[float, f
     return float(iou), float(viable_iou)
 
 
+def differing_pairs(lattice, samples: dict) -> dict[int, tuple[float, float]]:
+    """For each level L of the lattice: (share of level-L neighbour pairs of the dense map
+    that differ in viability or grasp type, share that differ in viability), over the points
+    that exist at level L. Where borders are smooth surfaces this halves from one level to the
+    next (border cells grow as area, the grid as volume), which is what lets refinement skip
+    most of the grid; where it does not, no border method can."""
+    from graspscape.services.coordinator.manifolds.behaviour import differs
+
+    shares = {}
+    for level in range(lattice.depth + 1):
+        seen: set[frozenset] = set()
+        border = viability = 0
+        for p, a in samples.items():
+            if lattice.birth(p) > level:
+                continue
+            for _, q in lattice.neighbours(p, level):
+                b = samples.get(q)
+                if b is None or frozenset((p, q)) in seen:
+                    continue
+                seen.add(frozenset((p, q)))
+                border += differs(a, b)
+                viability += a.viable != b.viable
+        pairs = len(seen)
+        shares[level] = (border / max(pairs, 1), viability / max(pairs, 1))
+    return shares
+
+
 def with_configuration_inference(results: list[PoseResult], match) -> list[PoseResult]:
     """What a worker with shortcut 2 returns for a tile whose plain results are `results`.
     Synthesis is deterministic and the shortcut leaves it alone, so a pose's own synthesized
@@ -199,13 +229,13 @@ def with_configuration_inference(results: list[PoseResult], match) -> list[PoseR
 
 
 def run_config(name: str, rolls: int, multiple: int, variant: str,
-               dense: dict[str, PoseResult], radius) -> dict[str, float]:
+               dense: dict[str, PoseResult], radius, levels: int = LEVELS) -> dict[str, float]:
     url = f"sqlite:///{tempfile.mkdtemp()}/bench.db"
     db.upgrade(url)
     sessions = db.make_sessionmaker(db.make_engine(url))
     with sessions() as s:
         obj, _ = create_named(s, name=name, properties={}, shared_dir=None)
-        spec = _spec(obj.id, rolls, multiple, variant)
+        spec = _spec(obj.id, rolls, multiple, variant, levels)
         eid = create_exploration(s, spec=spec, tile_target_poses=60, max_poses=10**7).id
 
     def evaluate(poses, match=None):
@@ -291,6 +321,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--objects", nargs="+", default=["mug", "cube"])
     parser.add_argument("--rolls", nargs="+", type=int, default=[1, 2, 4, 8])
+    parser.add_argument("--levels", type=int, default=LEVELS,
+                        help="refinement levels below the 30° coarse pass (the dense grid is "
+                        "at the finest); other than 1, the figures go to "
+                        "exploration_accuracy_levels<N>.json")
     parser.add_argument("--merge", action="store_true",
                         help="keep the other configurations' rows of the existing results file")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "gs-bench",
@@ -303,7 +337,9 @@ def main() -> None:
     table: list[dict] = []
     dense_walls: dict[str, float] = {}
     multiples: dict[str, int] = {}
-    previous = RESULTS_DIR / "exploration_accuracy.json"
+    levels = args.levels
+    results_name = "exploration_accuracy" + ("" if levels == LEVELS else f"_levels{levels}")
+    previous = RESULTS_DIR / f"{results_name}.json"
     if args.merge and previous.exists():
         # Keep the rows of configurations this invocation does not recompute.
         old = json.loads(previous.read_text())
@@ -317,11 +353,19 @@ def main() -> None:
         for name in args.objects:
             top = max(args.rolls)
             multiples[name] = multiple = azimuth_multiple_of(name)
-            dense, dense_wall = dense_results(name, pool, args.cache, top, multiple)
+            dense, dense_wall = dense_results(name, pool, args.cache, top, multiple, levels)
             if dense_wall > 0.0:  # 0: kept from a run at more rolls; its time stays
                 dense_walls[name] = round(dense_wall, 1)
             radius = radius_function(_mesh_for(ObjectSpec(name=name).model_dump_json()))
-            if 1 in args.rolls:
+            lattice1 = Lattice(_spec(1, 1, multiple, levels=levels).grid, levels)
+            samples1 = {p: Sample.from_row(_Row(dense[lattice1.pose(p).key()]))
+                        for p in _fine_points(lattice1)}
+            for level, (border, viability) in differing_pairs(lattice1, samples1).items():
+                step = f"{30.0 / 2**level:g}deg"
+                figures[f"{name}.rolls1.dense_pairs_differing_share_at_{step}"] = round(border, 4)
+                figures[f"{name}.rolls1.dense_pairs_differing_viability_share_at_{step}"] = round(
+                    viability, 4)
+            if 1 in args.rolls and levels == LEVELS:  # at depth 2 it would double the run
                 iou, viable_iou = reproducibility(name, pool, multiple, dense, radius)
                 figures[f"{name}.rolls1.dense_reproducibility_iou_moved_1um"] = round(iou, 4)
                 figures[f"{name}.rolls1.dense_reproducibility_viable_iou_moved_1um"] = round(
@@ -329,7 +373,7 @@ def main() -> None:
                 print(f"{name}: 1-roll dense map vs moved 1 µm: IoU {iou:.4f}", flush=True)
             for rolls in args.rolls:
                 for variant in VARIANTS:
-                    row = run_config(name, rolls, multiple, variant, dense, radius)
+                    row = run_config(name, rolls, multiple, variant, dense, radius, levels)
                     # the dense pass at r rolls is the 8-roll pass's share of its attitudes
                     # Both estimates on one footing: measured CPU seconds over 2 processes
                     # (+ the adaptive run's measured store and decision time).
@@ -343,9 +387,10 @@ def main() -> None:
                                 "adaptive_wall_estimate_s", "dense_wall_estimate_s"):
                         figures[f"{tag}.{key}"] = row[key]
                     print(json.dumps(row), flush=True)
-                    write_results("exploration_accuracy", figures, {
-                        "setup": {"grid": GRID, "refinement_levels": LEVELS,
-                                  "finest_step_deg": 15.0, "finest_dr_m": 0.005,
+                    write_results(results_name, figures, {
+                        "setup": {"grid": GRID, "refinement_levels": levels,
+                                  "finest_step_deg": 30.0 / 2**levels,
+                                  "finest_dr_m": GRID["dr"] / 2**levels,
                                   "processes": PROCESSES, "gripper": "robotiq_3f",
                                   "azimuth_multiple": multiples},
                         "dense_pass_wall_s_this_invocation": dense_walls,
