@@ -101,12 +101,13 @@ class Worker:
     """`graspscape worker` (a supervisor with N simulation processes) as a child process."""
 
     def __init__(self, endpoint: str, procs: int, name: str, cache_dir: Path,
-                 instant: bool = False, tiles_per_request: int = 1) -> None:
+                 instant: bool = False, tiles_per_request: int = 1,
+                 log_level: str = "info") -> None:
         self.log_path = cache_dir.parent / f"worker-{name}.log"
         self.log = open(self.log_path, "wb")  # noqa: SIM115
         args = [sys.executable, "-m", "graspscape.shared.cli", "worker", "--connect", endpoint,
                 "--procs", str(procs), "--name", name, "--cache-dir", str(cache_dir),
-                "--log-level", "info"]
+                "--log-level", log_level]
         if instant:
             args.append("--instant")
         if tiles_per_request != 1:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import signal
-import time
 from pathlib import Path
 
 import pytest
@@ -152,12 +151,13 @@ def test_coordinator_restart_mid_exploration(
 def test_sigterm_finishes_the_pose_sends_it_and_releases_the_rest(
     coordinator: Coordinator, sqlite_sessions: sessionmaker[Session], tmp_path: Path
 ) -> None:
-    # The first tile: 12 poses at a pole, a few seconds of work (a 6-pose tile finished
-    # within the sleep below on a fast machine).
+    # The first tile: 12 poses at a pole, a second or more of work after its first pose.
     submit(sqlite_sessions, tile_poses=12, r_max=0.12)
-    worker = Worker(coordinator.endpoint, 1, "leaving", tmp_path / "cache")
+    worker = Worker(coordinator.endpoint, 1, "leaving", tmp_path / "cache", log_level="debug")
     tile_id, _, _ = wait_for(lambda: _leased(sqlite_sessions), 60, "a leased tile")[0]
-    time.sleep(1.5)  # into the tile: loading the scene and the first pose take about that
+    # Into the tile: its first pose is done (the worker logs each pose at debug level).
+    wait_for(lambda: f"tile {tile_id}: pose 1 of 12 evaluated" in worker.output(), 60,
+             "the first pose of the tile", every=0.02)
     assert worker.stop() == 0
     with sqlite_sessions() as session:
         tile = session.get(TileRow, tile_id)

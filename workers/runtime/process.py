@@ -181,6 +181,8 @@ class WorkerProcess:
                 if self.stop.is_set():
                     break
                 results.append(self._evaluate(tile, obj, pose, donors))
+                log.debug("%s: tile %d: pose %d of %d evaluated", self.worker_id,
+                          tile.tile_id, len(results), len(poses))
         except Exception as exc:  # the tile cannot be evaluated here: report it, go on
             log.exception("%s: tile %d failed", self.worker_id, tile.tile_id)
             self._deliver(self._batch(tile, results, final=False,
