@@ -43,10 +43,14 @@ def pose_grid() -> list[Pose]:
 
 def run(obj: ObjectSpec, settings: SimSettings, poses: list[Pose],
         world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
-        ) -> tuple[list[PoseResult], float]:
+        engine: dict | None = None) -> tuple[list[PoseResult], float]:
+    """The grid's results and their wall time on one warm evaluator. `engine`: pybullet
+    engine parameters beyond SimSettings (set once: they outlive restoreState)."""
     prepared = prepare_object(obj, default_cache_dir() / "objects")
     with Evaluator(prepared, load_gripper("robotiq_3f"), settings,
                    work_dir=default_cache_dir(), world_offset=world_offset) as evaluator:
+        if engine:
+            p.setPhysicsEngineParameter(physicsClientId=evaluator.client, **engine)
         evaluator.evaluate(poses[0])  # warm caches outside the timing
         started = time.perf_counter()
         results = [evaluator.evaluate(pose) for pose in poses]

@@ -14,24 +14,20 @@ with the reference, beside the reference's own agreement with itself with the ob
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
 import pybullet as p
-from graspscape.shared.specs.gripper import load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import PoseResult
 from graspscape.shared.specs.sim import PhysicsSettings, SimSettings
-from graspscape.workers.sim.evaluate import Evaluator, default_cache_dir
-from graspscape.workers.sim.objects import prepare_object
 
 try:
     from benchmarks._results import write_results
-    from benchmarks.bench_eval_pose import pose_grid, share_agreeing
+    from benchmarks.bench_eval_pose import pose_grid, run, share_agreeing
 except ModuleNotFoundError:  # run as a script from the repo root
     from _results import write_results
-    from bench_eval_pose import pose_grid, share_agreeing
+    from bench_eval_pose import pose_grid, run, share_agreeing
 
 # name → (rate Hz, solver iterations, extra pybullet engine parameters, world offset x in m)
 SETTINGS: dict[str, tuple[float, int, dict, float]] = {
@@ -49,18 +45,12 @@ SETTINGS: dict[str, tuple[float, int, dict, float]] = {
 }
 
 
-def run(prepared, poses: list[Pose], rate_hz: float, iterations: int, engine: dict,
-        offset_x: float) -> tuple[list[PoseResult], float]:
-    """The grid's results and evaluations/s with these settings (one evaluator, warm)."""
+def run_setting(obj: ObjectSpec, poses: list[Pose], rate_hz: float, iterations: int,
+                engine: dict, offset_x: float) -> tuple[list[PoseResult], float]:
+    """The grid's results and evaluations/s with these settings."""
     settings = SimSettings(physics=PhysicsSettings(rate_hz=rate_hz, solver_iterations=iterations))
-    with Evaluator(prepared, load_gripper("robotiq_3f"), settings, work_dir=default_cache_dir(),
-                   world_offset=(offset_x, 0.0, 0.0)) as evaluator:
-        if engine:  # engine parameters outlive restoreState: set once per client
-            p.setPhysicsEngineParameter(physicsClientId=evaluator.client, **engine)
-        evaluator.evaluate(poses[0])
-        started = time.perf_counter()
-        results = [evaluator.evaluate(pose) for pose in poses]
-        return results, len(poses) / (time.perf_counter() - started)
+    results, wall = run(obj, settings, poses, (offset_x, 0.0, 0.0), engine)
+    return results, len(poses) / wall
 
 
 def main() -> None:
@@ -68,16 +58,16 @@ def main() -> None:
     parser.add_argument("--object", default="pb:mug")
     parser.add_argument("--no-write", action="store_true")
     args = parser.parse_args()
-    prepared = prepare_object(ObjectSpec(name=args.object), default_cache_dir() / "objects")
+    obj = ObjectSpec(name=args.object)
     poses = pose_grid()
-    reference, reference_rate = run(prepared, poses, 240.0, 50, {}, 0.0)
+    reference, reference_rate = run_setting(obj, poses, 240.0, 50, {}, 0.0)
     figures: dict[str, float] = {
         "poses": len(poses),
         "reference_evals_per_s_per_core": reference_rate,
         "reference_held_share": float(np.mean([r.viable for r in reference])),
     }
     for name, (rate_hz, iterations, engine, offset_x) in SETTINGS.items():
-        results, rate = run(prepared, poses, rate_hz, iterations, engine, offset_x)
+        results, rate = run_setting(obj, poses, rate_hz, iterations, engine, offset_x)
         both = [(a.mu_s, b.mu_s) for a, b in zip(reference, results, strict=True)
                 if a.viable and b.viable]
         figures[f"{name}.agreement_with_reference_share"] = share_agreeing(reference, results)
