@@ -90,6 +90,35 @@ def test_neighbours_are_symmetric_and_midpoints_new() -> None:
                 assert lattice.angle(p, mid) <= 0.8 * lattice.angle(p, q) + 1e-6
 
 
+def _overlapping_by_scan(lattice: Lattice, p: Point, level: int) -> list[Point]:
+    """Cross neighbours by testing every azimuth of the adjacent rings for overlap."""
+    phi = lattice.pose(p).phi
+    half = math.pi / lattice.m_at(p.K, level)
+    out = []
+    for K in (p.K - lattice.scale(level), p.K + lattice.scale(level)):
+        if not 0 <= K <= lattice.n_rings:
+            continue
+        m_l = lattice.m_at(K, level)
+        step = 1 if lattice.is_pole(K) else lattice.m(K) // m_l
+        for j in range(m_l):
+            gap = abs(math.remainder(j * 2 * math.pi / m_l - phi, 2 * math.pi))
+            if lattice.is_pole(p.K) or lattice.is_pole(K) or gap < half + math.pi / m_l - 1e-9:
+                out.append(Point(K, j * step, p.I, p.a))
+    return out
+
+
+@pytest.mark.parametrize("degrees", [90, 45, 30, 15, 10])
+@pytest.mark.parametrize("multiple", [1, 4, 8])
+def test_cross_neighbours_are_the_overlapping_cells_of_the_adjacent_rings(
+        degrees: int, multiple: int) -> None:
+    grid = PoseGridSpec(dtheta=math.radians(degrees), r_max=0.0, azimuth_multiple=multiple)
+    lattice = Lattice(grid, 2)
+    for level in range(3):
+        for K, J in lattice.cells(level):
+            p = Point(K, J, 0, 0)
+            assert lattice.cross_neighbours(p, level) == _overlapping_by_scan(lattice, p, level)
+
+
 def test_group_tiles_cover_exactly_the_given_poses() -> None:
     lattice = Lattice(GRIDS[1], 1)
     poses = [lattice.pose(p) for p in lattice.coarse_points()[::3]]

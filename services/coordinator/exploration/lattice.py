@@ -107,14 +107,22 @@ class Lattice:
             out.append(1 if self.is_pole(K) else m_b)
         return out
 
+    @cached_property
+    def _ring_births(self) -> list[int]:
+        return [self.ring_birth(K) for K in range(self.n_rings + 1)]
+
+    @cached_property
+    def _m_finest(self) -> list[int]:
+        return [self.m_at(K, self.depth) for K in range(self.n_rings + 1)]
+
     def m_at(self, K: int, level: int) -> int:
         """Azimuths on ring K at `level` (the ring must exist there)."""
         if self.is_pole(K):
             return 1
-        return self._m_birth[K] << (level - self.ring_birth(K))
+        return self._m_birth[K] << (level - self._ring_births[K])
 
     def m(self, K: int) -> int:
-        return self.m_at(K, self.depth)
+        return self._m_finest[K]
 
     def ring_exists(self, K: int, level: int) -> bool:
         return K % self.scale(level) == 0
@@ -205,18 +213,31 @@ class Lattice:
     def cross_neighbours(self, p: Point, level: int) -> list[Point]:
         """Points of the rings just above and below whose azimuth cells overlap p's."""
         s = self.scale(level)
-        phi = self.pose(p).phi
+        pole = self.is_pole(p.K)
+        phi = 0.0 if pole else p.J * TWO_PI / self.m(p.K)  # as pose() has it
         half = math.pi / self.m_at(p.K, level)
         out = []
         for K in (p.K - s, p.K + s):
             if not 0 <= K <= self.n_rings:
                 continue
             m_l = self.m_at(K, level)
-            step = 1 if self.is_pole(K) else self.m(K) // m_l
-            for j in range(m_l):
-                phi_q = j * TWO_PI / m_l
-                gap = abs(math.remainder(phi_q - phi, TWO_PI))
-                if self.is_pole(p.K) or self.is_pole(K) or gap < half + math.pi / m_l - 1e-9:
+            if pole or self.is_pole(K):
+                step = 1 if self.is_pole(K) else self.m(K) // m_l
+                out += [Point(K, j * step, p.I, p.a) for j in range(m_l)]
+                continue
+            step = self.m(K) // m_l
+            # Only azimuths within half a cell of each ring's width can overlap: test those
+            # (the test itself unchanged) instead of every azimuth of the ring.
+            reach = half + math.pi / m_l - 1e-9
+            centre = round(phi * m_l / TWO_PI)
+            width = math.ceil(reach * m_l / TWO_PI) + 1
+            if 2 * width + 1 >= m_l:
+                candidates = range(m_l)
+            else:
+                candidates = sorted({(centre + d) % m_l for d in range(-width, width + 1)})
+            for j in candidates:
+                gap = abs(math.remainder(j * TWO_PI / m_l - phi, TWO_PI))
+                if gap < reach:
                     out.append(Point(K, j * step, p.I, p.a))
         return out
 
