@@ -40,7 +40,7 @@ from graspscape.services.coordinator.store.models import (
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
-from sqlalchemy import delete, select, update
+from sqlalchemy import bindparam, delete, select, update
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
@@ -148,27 +148,35 @@ def refresh_manifolds(
     keys_of: dict[int, list[str]] = {}
     for p, label in label_of.items():
         keys_of.setdefault(label, []).append(samples[p].key)
-    for m in mmap.manifolds:
-        best_sig = session.scalar(
-            select(PoseRow.signature).where(PoseRow.exploration_id == exploration_id,
-                                            PoseRow.pose_key == m.best.key)
-        )
-        row = ManifoldRow(
-            exploration_id=exploration_id, label=m.label, signature=best_sig,
+    # A few statements per refresh, not a few per manifold: a cube map has hundreds.
+    best_keys = sorted({m.best.key for m in mmap.manifolds})
+    signature_of: dict[str, Any] = {}
+    for i in range(0, len(best_keys), _KEY_CHUNK):
+        signature_of.update((key, signature) for key, signature in session.execute(
+            select(PoseRow.pose_key, PoseRow.signature).where(
+                PoseRow.exploration_id == exploration_id,
+                PoseRow.pose_key.in_(best_keys[i : i + _KEY_CHUNK]))))
+    rows = [
+        ManifoldRow(
+            exploration_id=exploration_id, label=m.label, signature=signature_of.get(m.best.key),
             size=m.pose_count, best_pose_key=m.best.key, best_mu_s=m.best.mu_s,
             summary={**m.model_dump(mode="json"), "final": final, "poses_done": poses_done},
         )
-        session.add(row)
-        session.flush()
-        keys = sorted(keys_of.get(m.label, []))
-        for i in range(0, len(keys), _KEY_CHUNK):
-            session.execute(
-                update(PoseRow)
-                .where(PoseRow.exploration_id == exploration_id,
-                       PoseRow.pose_key.in_(keys[i : i + _KEY_CHUNK]))
-                .values(manifold_id=row.id)
-                .execution_options(synchronize_session=False)
-            )
+        for m in mmap.manifolds
+    ]
+    session.add_all(rows)
+    session.flush()
+    assignments = [{"m": row.id, "k": key}
+                   for row, m in zip(rows, mmap.manifolds, strict=True)
+                   for key in sorted(keys_of.get(m.label, []))]
+    if assignments:
+        poses = PoseRow.__table__
+        session.connection().execute(
+            poses.update()
+            .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
+            .values(manifold_id=bindparam("m")),
+            assignments,
+        )
     return mmap
 
 
