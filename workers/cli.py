@@ -37,10 +37,18 @@ def _load(args: argparse.Namespace):
 
 
 def _eval_pose(args: argparse.Namespace) -> int:
-    from graspscape.workers.sim.evaluate import evaluate_pose
+    from graspscape.workers.sim.evaluate import evaluate_pose, robustness_pose
 
     obj, settings, pose = _load(args)
-    result = evaluate_pose(pose, obj=obj, gripper=args.gripper, settings=settings)
+    if args.robustness is not None:
+        from graspscape.shared.specs.robustness import TEST_NAMES, RobustnessSettings
+
+        chosen = TEST_NAMES if args.robustness == "all" else tuple(
+            name.strip() for name in args.robustness.split(",") if name.strip())
+        result = robustness_pose(pose, obj=obj, gripper=args.gripper, settings=settings,
+                                 robustness=RobustnessSettings(tests=chosen))
+    else:
+        result = evaluate_pose(pose, obj=obj, gripper=args.gripper, settings=settings)
     print(json.dumps(result.model_dump(mode="json"), indent=2))
     return 0
 
@@ -58,6 +66,10 @@ def _render_pose(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     ev = subparsers.add_parser("eval-pose", help="simulate one pose and print its result (JSON)")
     _pose_args(ev)
+    ev.add_argument("--robustness", nargs="?", const="all", metavar="TESTS",
+                    help="also run robustness margins and grasp tests on the synthesized grasp: "
+                    "every one (a few seconds), or a comma-separated choice of torque_margin, "
+                    "friction_margin, gravity, force, tug, shake (docs/metrics.md)")
     ev.set_defaults(handler=_eval_pose)
     rp = subparsers.add_parser("render-pose", help="write a PNG of the grasp a pose synthesizes")
     _pose_args(rp)

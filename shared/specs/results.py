@@ -56,6 +56,36 @@ class PhaseTimes(BaseModel):
     sensitivity_steps: int = 0
 
 
+class RobustnessReport(BaseModel):
+    """Robustness margins and grasp tests of one synthesized grasp (workers/sim/robustness.py,
+    docs/metrics.md). A field is None where its test did not run (not chosen, or the pose was
+    not held); a margin is also None where the grasp drops even at the nominal value."""
+
+    model_config = ConfigDict(frozen=True)
+
+    torque_margin_nm: float | None = Field(
+        default=None, ge=0.0,
+        description="least closing effort at which the synthesized grasp still holds, N·m")
+    torque_margin_ratio: float | None = Field(
+        default=None, le=1.0, description="1 − torque_margin_nm / the closing effort used")
+    friction_margin: float | None = Field(
+        default=None, ge=0.0,
+        description="least object lateral friction coefficient (pybullet's per-body value; "
+        "the contact's is its product with the links' 0.5) at which the grasp still holds")
+    gravity_test_share: float | None = Field(
+        default=None, ge=0.0, le=1.0, description="share of 6 gravity directions passed")
+    force_test_share: float | None = Field(
+        default=None, ge=0.0, le=1.0, description="share of 6 external force directions passed")
+    tug_force_n: float | None = Field(
+        default=None, ge=0.0,
+        description="pull along the approach axis at which the object slips (the ramp's top "
+        "if it never does), N")
+    shake_survival_s: float | None = Field(
+        default=None, ge=0.0,
+        description="time into the shake at which the object falls off (the full duration if "
+        "it never does), s")
+
+
 class PoseResult(BaseModel):
     pose: Pose
     pose_key: str
@@ -83,3 +113,5 @@ class PoseResult(BaseModel):
         default=None, ge=0.0, description="perturbation resistance, in object weights")
     min_closing_effort: float | None = Field(
         default=None, ge=0.0, description="least closing torque that still holds, N·m")
+    robustness: RobustnessReport | None = Field(
+        default=None, description="margins and grasp tests (Evaluator.robustness only)")

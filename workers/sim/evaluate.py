@@ -5,12 +5,16 @@ evaluation starts by restoring the state saved right after loading (positions, v
 the contact cache), and sets every motor, constraint and gravity it uses, so a result never
 depends on what the client evaluated before. Phases: placement (with back-off from
 interpenetration), approach (policy), closing (policy), release and trajectory with μs probes.
+`Evaluator.robustness` also keeps the synthesized grasp and runs the margins and grasp tests of
+workers/sim/robustness.py on it.
 """
 
 from __future__ import annotations
 
 import os
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +28,9 @@ from graspscape.shared.specs.results import (
     Outcome,
     PhaseTimes,
     PoseResult,
+    RobustnessReport,
 )
+from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.configuration_inference import DonorPool, inferred
 from graspscape.workers.sim.geometry import quat_from_matrix
@@ -40,6 +46,7 @@ from graspscape.workers.sim.objects import (
 from graspscape.workers.sim.placement import place_gripper
 from graspscape.workers.sim.policies import get_policy
 from graspscape.workers.sim.render import render_scene
+from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, run_tests
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.signature import build_signature
 from graspscape.workers.sim.trajectory import reference_pose
@@ -194,6 +201,13 @@ class Evaluator:
         trajectory) is written there. With `donors` (shortcut 2), a synthesized grasp that
         matches a donor's reuses its outcome, μs and effort; one taken through the trajectory
         joins the donors."""
+        return self._evaluate(pose, picture=picture, donors=donors)[0]
+
+    def _evaluate(self, pose: Pose, *, picture: Path | None = None,
+                  donors: DonorPool | None = None, keep_grasp: bool = False,
+                  ) -> tuple[PoseResult, SynthesizedGrasp | None]:
+        """`evaluate`, and with `keep_grasp` the synthesized grasp (a saved state the caller
+        must remove; None where no grasp formed)."""
         started = time.perf_counter()
         phases = PhaseTimes()
         self._reset()
@@ -201,16 +215,17 @@ class Evaluator:
         phases.reset_s = time.perf_counter() - started
         result = dict(pose=pose, pose_key=pose.key(), phases=phases)
         if start is None:
-            return self._finish(started, Outcome.INFEASIBLE, result)
+            return self._finish(started, Outcome.INFEASIBLE, result), None
         position, rotation, target, gap = start
         result["effective_r"] = gap
 
         outcome = self.policy.synthesize(self.scene, position, rotation, target,
                                          self.settings, phases)
         if outcome is not None:
-            return self._finish(started, outcome, result)
+            return self._finish(started, outcome, result), None
 
         hand, scene = self.scene.hand, self.scene
+        grasp = capture_grasp(scene) if keep_grasp else None
         obj_pos, obj_rot = scene.object_pose()
         base_pos, base_rot = hand.frame_pose()
         rel_rot = obj_rot.T @ base_rot
@@ -234,7 +249,7 @@ class Evaluator:
         donor = None if donors is None else donors.find(
             pose, result["grasp"], result["signature"].links_in_contact)
         if donor is not None:
-            return inferred(self._finish(started, donor.outcome, result), donor)
+            return inferred(self._finish(started, donor.outcome, result), donor), grasp
         held, qualities, effort = self._run_trajectory(phases)
         result["effort_max_nm"] = effort
         if held:
@@ -243,9 +258,76 @@ class Evaluator:
         finished = self._finish(started, Outcome.HELD if held else Outcome.DROPPED, result)
         if donors is not None:
             donors.add(finished)
-        return finished
+        return finished, grasp
 
-    def _run_trajectory(self, phases: PhaseTimes) -> tuple[bool, list[float], float]:
+    # --- robustness (workers/sim/robustness.py) ------------------------------------------
+    @contextmanager
+    def synthesized(self, pose: Pose) -> Iterator[tuple[PoseResult, SynthesizedGrasp | None]]:
+        """Evaluates `pose` as `evaluate` does and yields its result with the synthesized grasp
+        (None where no grasp formed), whose saved state is removed on leaving the block."""
+        result, grasp = self._evaluate(pose, keep_grasp=True)
+        try:
+            yield result, grasp
+        finally:
+            if grasp is not None:
+                p.removeState(grasp.state, physicsClientId=self.client)
+
+    def restore_grasp(self, grasp: SynthesizedGrasp, *, effort: float | None = None) -> None:
+        """Puts the simulation back where synthesis left it: bodies (through a contact-free
+        state, so no contact cache carries over from what ran before), motor commands (with
+        `effort`, the fingers' forces scaled to that closing effort), drive and fixture
+        constraints, zero gravity and the object's own friction."""
+        scene, cid = self.scene, self.client
+        p.restoreState(self.pristine, physicsClientId=cid)
+        p.performCollisionDetection(physicsClientId=cid)
+        p.restoreState(grasp.state, physicsClientId=cid)
+        scene.hand.commands = dict(grasp.commands)
+        scene.hand.effort = grasp.effort
+        scene.hand.reissue(effort)
+        pivot, orientation, force = grasp.drive
+        p.changeConstraint(scene.drive_constraint, jointChildPivot=pivot,
+                           jointChildFrameOrientation=orientation, maxForce=force,
+                           physicsClientId=cid)
+        pivot, orientation, force = grasp.fixture
+        p.changeConstraint(scene.fixture_constraint, jointChildPivot=pivot,
+                           jointChildFrameOrientation=orientation, maxForce=force,
+                           physicsClientId=cid)
+        p.setGravity(0, 0, 0, physicsClientId=cid)
+        p.changeDynamics(scene.object_body, -1, lateralFriction=grasp.friction,
+                         physicsClientId=cid)
+
+    def holds_along_trajectory(self, grasp: SynthesizedGrasp, *, effort: float | None = None,
+                               friction: float | None = None) -> bool:
+        """Whether the synthesized grasp, restored with the fingers' closing effort `effort`
+        (N·m) and the object's lateral friction `friction`, holds through the release and the
+        reference trajectory (no μs probes). The object's friction is put back afterwards."""
+        self.restore_grasp(grasp, effort=effort)
+        try:
+            if friction is not None:
+                p.changeDynamics(self.scene.object_body, -1, lateralFriction=friction,
+                                 physicsClientId=self.client)
+            held, _, _ = self._run_trajectory(PhaseTimes(), probes=False)
+        finally:
+            p.changeDynamics(self.scene.object_body, -1, lateralFriction=grasp.friction,
+                             physicsClientId=self.client)
+        return held
+
+    def robustness(self, pose: Pose, settings: RobustnessSettings | None = None,
+                   ) -> tuple[PoseResult, RobustnessReport]:
+        """Evaluates `pose` as `evaluate` does and, if it held, runs the chosen tests
+        (`settings`; None: every test) on its synthesized grasp. The result carries the report
+        in `robustness`; where the pose did not hold every field of the report is None."""
+        settings = settings or RobustnessSettings.every_test()
+        with self.synthesized(pose) as (result, grasp):
+            report = RobustnessReport()
+            if grasp is not None and result.outcome is Outcome.HELD:
+                report = run_tests(self, grasp, settings)
+        return result.model_copy(update={"robustness": report}), report
+
+    def _run_trajectory(self, phases: PhaseTimes, *, probes: bool = True,
+                        ) -> tuple[bool, list[float], float]:
+        """Release and reference trajectory from the present state; with `probes`, μs probes
+        at the sampled instants of a grasp that held (their qualities are returned)."""
         scene, hand, cid = self.scene, self.scene.hand, self.client
         spec, metric = self.settings.trajectory, self.settings.metric
         t0 = time.perf_counter()
@@ -298,7 +380,7 @@ class Evaluator:
         saved: dict[int, int] = {}
         window = metric.window_steps
         for step in range(n_steps if held else 0):
-            if step in instants:
+            if probes and step in instants:
                 saved[step] = p.saveState(physicsClientId=cid)
             position, rotation = target(step + 1)
             scene.drive_to(position, rotation)
@@ -358,6 +440,15 @@ def evaluate_pose(pose: Pose, *, obj: ObjectSpec, gripper: GripperSpec | str = "
     """Evaluates one pose, reusing this process's evaluator for the same object, gripper and
     settings (one pybullet client each, loaded once). `donors`: see Evaluator.evaluate."""
     return _evaluator(obj, gripper, settings, cache_dir).evaluate(pose, donors=donors)
+
+
+def robustness_pose(pose: Pose, *, obj: ObjectSpec, gripper: GripperSpec | str = "robotiq_3f",
+                    settings: SimSettings | None = None,
+                    robustness: RobustnessSettings | None = None,
+                    cache_dir: Path | None = None) -> PoseResult:
+    """Evaluates one pose and, if it held, runs the robustness tests (`robustness`; None:
+    every test) on its synthesized grasp; the report is the result's `robustness`."""
+    return _evaluator(obj, gripper, settings, cache_dir).robustness(pose, robustness)[0]
 
 
 def render_pose(pose: Pose, path: Path, *, obj: ObjectSpec,

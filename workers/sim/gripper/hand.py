@@ -83,6 +83,9 @@ class Hand:
                                     forces=[0.0] * len(self.movable), physicsClientId=client)
         self.effort = spec.closing_effort
         self.hold_factor = 3.0
+        # The last motor command of each finger and spread joint: (mode, target, force).
+        # pybullet's saved states hold no motor settings; `reissue` puts these back.
+        self.commands: dict[int, tuple[int, float, float]] = {}
 
     # --- poses -------------------------------------------------------------------------
     def com_pose_for(self, frame_pos: np.ndarray, frame_rot: np.ndarray) -> tuple[list, list]:
@@ -110,19 +113,45 @@ class Hand:
                 p.setJointMotorControl2(self.body, finger.spread_joint, p.POSITION_CONTROL,
                                         targetPosition=angle, force=10 * effort,
                                         physicsClientId=cid)
+                self.commands[finger.spread_joint] = (p.POSITION_CONTROL, angle, 10 * effort)
         self._hold(self.finger_joints, [q for f in self.fingers for q in f.open_values])
 
     def _hold(self, joints: list[int], targets: list[float]) -> None:
+        self.hold_positions(joints, targets, self.hold_factor * self.effort)
+
+    def hold_positions(self, joints: list[int], targets: list[float], force: float) -> None:
+        """Position motors on `joints` (a policy's joint targets), each capped at `force`."""
         if joints:
             p.setJointMotorControlArray(self.body, joints, p.POSITION_CONTROL,
-                                        targetPositions=targets,
-                                        forces=[self.hold_factor * self.effort] * len(joints),
+                                        targetPositions=targets, forces=[force] * len(joints),
                                         physicsClientId=self.client)
+            for j, q in zip(joints, targets, strict=True):
+                self.commands[j] = (p.POSITION_CONTROL, float(q), force)
+
+    def _velocity(self, joint: int, target: float, force: float) -> None:
+        p.setJointMotorControl2(self.body, joint, p.VELOCITY_CONTROL, targetVelocity=target,
+                                force=force, physicsClientId=self.client)
+        self.commands[joint] = (p.VELOCITY_CONTROL, target, force)
 
     def _close(self, finger: FingerJoints, k: int, speed: float) -> None:
-        p.setJointMotorControl2(self.body, finger.joints[k], p.VELOCITY_CONTROL,
-                                targetVelocity=speed, force=self.effort * finger.shares[k],
-                                physicsClientId=self.client)
+        self._velocity(finger.joints[k], speed, self.effort * finger.shares[k])
+
+    def reissue(self, effort: float | None = None) -> None:
+        """Sends the last motor commands again (after a restoreState, which keeps none).
+        With `effort`, every finger joint's force is scaled by effort / the closing effort the
+        commands were made with (each phalanx pushes with its share of `effort`, a held one
+        holds with hold_factor × `effort`); the spread joints keep theirs."""
+        scale = 1.0 if effort is None else effort / self.effort
+        fingers = set(self.finger_joints)
+        for joint, (mode, target, force) in self.commands.items():
+            if joint in fingers:
+                force *= scale
+            if mode == p.POSITION_CONTROL:
+                p.setJointMotorControl2(self.body, joint, mode, targetPosition=target,
+                                        force=force, physicsClientId=self.client)
+            else:
+                p.setJointMotorControl2(self.body, joint, mode, targetVelocity=target,
+                                        force=force, physicsClientId=self.client)
 
     def _settle(self, finger: FingerJoints, k: int, angle: float, touching: frozenset[int], *,
                 stop_free: bool) -> None:
@@ -139,9 +168,7 @@ class Hand:
             target = 0.0
         else:
             return
-        p.setJointMotorControl2(self.body, finger.joints[k], p.VELOCITY_CONTROL,
-                                targetVelocity=target, force=self.effort * finger.shares[k],
-                                physicsClientId=self.client)
+        self._velocity(finger.joints[k], target, self.effort * finger.shares[k])
 
     def settle(self, touching: frozenset[int]) -> None:
         """The end of closing: the grasp is formed. Every phalanx that closed pushes on the

@@ -175,9 +175,7 @@ class HapticPolicy:
                                                             physicsClientId=cid)])
 
         def command_joints(values: np.ndarray, force: float) -> None:
-            p.setJointMotorControlArray(hand.body, joints, p.POSITION_CONTROL,
-                                        targetPositions=values.tolist(),
-                                        forces=[force] * len(joints), physicsClientId=cid)
+            hand.hold_positions(joints, values.tolist(), force)
 
         def run(steps: int) -> None:
             for _ in range(steps):
