@@ -1,7 +1,9 @@
 """How μs depends on how it is measured: halve each measurement choice and compare.
 
 For a fixed set of held grasps (sphere and mug), μs is computed with the default metric
-settings and with each of instants, window, perturbation size and characteristic length halved.
+settings and with each of instants, window, perturbation size (linear and angular) and
+characteristic length halved, and with the object moved by 1 µm, by (0.5, −0.3, 0.2) m and by
+(10, 10, 1) m.
 Reports, per variant, the mean |Δμs| and the Spearman rank correlation with the default.
 
     .venv/bin/python benchmarks/bench_metric_stability.py   # writes results/metric_stability.json
@@ -52,8 +54,9 @@ def main() -> None:
     variants = {
         "instants": base.model_copy(update={"instants": max(1, base.instants // 2)}),
         "window": base.model_copy(update={"window_steps": max(1, base.window_steps // 2)}),
-        "perturbation": base.model_copy(
-            update={"perturbation_m_s2": base.perturbation_m_s2 / 2}),
+        "perturbation": base.model_copy(update={
+            "perturbation_m_s2": base.perturbation_m_s2 / 2,
+            "angular_perturbation_rad_s2": base.angular_perturbation_rad_s2 / 2}),
     }
     reference = np.array(mu_values(base))
     held = reference > 0
@@ -63,9 +66,13 @@ def main() -> None:
     variants_values = {name: mu_values(metric) for name, metric in variants.items()}
     variants_values["length"] = mu_values(base, length_factor=0.5)  # half the radius of gyration
     variants_values["moved_1um"] = mu_values(base, world_offset=(1e-6, 0.0, 0.0))
+    variants_values["moved_0p5m"] = mu_values(base, world_offset=(0.5, -0.3, 0.2))
+    variants_values["moved_10m"] = mu_values(base, world_offset=(10.0, 10.0, 1.0))
     for name, values in variants_values.items():
         values = np.array(values)
-        label = name if name == "moved_1um" else f"halved_{name}"
+        label = name if name.startswith("moved") else f"halved_{name}"
+        if name.startswith("moved"):
+            figures[f"held_share_changed_{label}"] = float(np.mean((values > 0) != held))
         figures[f"mean_abs_mu_s_change_{label}"] = float(np.abs(values - reference)[held].mean())
         figures[f"rank_correlation_{label}"] = float(
             spearmanr(values[held], reference[held]).statistic)

@@ -398,8 +398,7 @@ class Evaluator:
         central = metric.differences == "central"
         for step, state in sorted(saved.items()):
             if held:
-                qualities.append(probe_instant(ctx, step, window, dt, metric.perturbation_m_s2,
-                                               self.length, central, state=state))
+                qualities.append(probe_instant(ctx, step, dt, metric, self.length, state=state))
                 phases.sensitivity_steps += (12 if central else 7) * window
             p.removeState(state, physicsClientId=cid)
         phases.sensitivity_s += time.perf_counter() - tp

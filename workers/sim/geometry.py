@@ -37,3 +37,13 @@ def axis_rotation(axis: int, angle: float) -> np.ndarray:
     m[i, j] = -s
     m[j, i] = s
     return m
+
+
+def rotation_vector(m: np.ndarray) -> np.ndarray:
+    """Rotation matrix → axis × angle (the log map), exact for angles below π."""
+    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    c = min(1.0, max(-1.0, 0.5 * (m[0, 0] + m[1, 1] + m[2, 2] - 1.0)))
+    angle = math.acos(c)
+    if angle < 1e-6:
+        return 0.5 * w  # sin θ ≈ θ: the skew part is θ·axis
+    return w * (angle / (2.0 * math.sin(angle)))

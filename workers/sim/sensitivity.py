@@ -1,12 +1,29 @@
-"""Probes G(t) = ∂η̈_o/∂η̈_r at one instant of the trajectory, in the simulator.
+"""Probes S(t) = G(t) − I = ∂(η̈_o − η̈_r)/∂η̈_r at one instant of the trajectory, in the simulator.
 
-From a saved state, one unperturbed rollout and six perturbed ones run for a short window. A
-perturbed rollout adds a constant acceleration ε along one axis to the commanded base motion,
-through the same drive constraint the trajectory uses (linear axes: a ½εt² offset; angular
-axes: a ½(ε/L)t² turn about the object's centre of mass). Responses are the changes, versus
-the unperturbed rollout, of the window-mean accelerations actually realised: of the gripper
-(at the gripper-fixed point that coincides with the object's centre of mass at the instant,
-so a rigid grasp gives G = I) and of the object. The state is restored afterwards.
+From a saved state, one unperturbed rollout and six perturbed ones run for a short window of T
+seconds. A perturbed rollout adds a constant acceleration ε along one axis to the commanded
+base motion, through the same drive constraint the trajectory uses (linear axes: a ½εt²
+offset; angular axes: a ½(ε/L)t² turn about the object's centre of mass). Each rollout ends
+with a snapshot of poses, and the responses are the changes of the snapshot against the
+unperturbed rollout's:
+
+- the base's realised perturbation: the displacement of the gripper-fixed anchor (the point
+  that coincides with the object's centre of mass at the instant) and the base's turn;
+- the object's motion *relative to the hand*: the displacement of its centre of mass from the
+  anchor and its turn relative to the base, both read in the hand's frame and expressed in
+  world axes with the unperturbed end orientation.
+
+A displacement δ after a window from the same state is ½·ā·T² for the window's (triangle-
+weighted) mean acceleration ā, so the ratio of the two responses is the ratio of mean
+accelerations: S = Δ_rel Δ_base⁻¹ (metric.deviation_matrix).
+
+Why relative poses and not absolute velocities (docs/metrics.md, "The estimator"): G − I taken
+as the difference of two absolute responses reads the gripper's velocity at the anchor with
+one orientation while the solver enforced contacts with another, a centripetal term of second
+order in ε that a one-sided difference keeps; an object welded to the palm scored 0.85–0.94
+(0.51 for a 3 cm ball, the error growing as 1/L²). The relative pose of a welded object does
+not change, whatever the base does, so the weld reads S = 0 (μs = 1) by construction, and
+relative poses do not depend on where the object is in the world.
 """
 
 from __future__ import annotations
@@ -16,8 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
-from graspscape.workers.sim.geometry import axis_rotation
-from graspscape.workers.sim.metric import instant_quality, sensitivity_matrix
+from graspscape.shared.specs.sim import MetricSettings
+from graspscape.workers.sim.geometry import axis_rotation, rotation_vector
+from graspscape.workers.sim.metric import deviation_matrix, instant_quality_of_deviation
 
 DriveFn = Callable[[np.ndarray, np.ndarray], None]
 TargetFn = Callable[[int], tuple[np.ndarray, np.ndarray]]
@@ -40,9 +58,8 @@ def restore_clean(ctx: ProbeContext, state: int) -> None:
     pybullet's saved state holds positions and velocities, not the solver's contact cache
     (the persistent manifolds and their warm-start impulses): a rollout from a restored state
     starts from whatever contacts the previous rollout left, so two rollouts from the same
-    state differ by up to 0.03 m/s in the window's response (of ~0.3 m/s). Passing through a
-    contact-free state drops every manifold, so each rollout starts from the same (empty)
-    cache and repeats exactly, whatever ran before it.
+    state differ. Passing through a contact-free state drops every manifold, so each rollout
+    starts from the same (empty) cache and repeats exactly, whatever ran before it.
     """
     cid = ctx.client
     if ctx.contact_free_state is not None:
@@ -51,58 +68,79 @@ def restore_clean(ctx: ProbeContext, state: int) -> None:
     p.restoreState(state, physicsClientId=cid)
 
 
-def _velocities(ctx: ProbeContext, point_local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    cid = ctx.client
-    _, orn = p.getBasePositionAndOrientation(ctx.hand_body, physicsClientId=cid)
-    v_b, w_b = p.getBaseVelocity(ctx.hand_body, physicsClientId=cid)
-    rot = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
-    w_b = np.array(w_b)
-    v_point = np.array(v_b) + np.cross(w_b, rot @ point_local)
-    v_o, w_o = p.getBaseVelocity(ctx.object_body, physicsClientId=cid)
-    return np.concatenate([v_point, w_b]), np.concatenate([v_o, w_o])
-
-
 @dataclass(frozen=True)
-class ProbeAnchor:
-    """Where the responses of one instant are read: the gripper-fixed point (in the base's COM
-    frame) that coincides with the object's centre of mass at the instant, and that centre."""
+class Snapshot:
+    """Where a rollout ended, in world axes: the anchor and the base's rotation, the object's
+    rotation and its centre's offset from the anchor."""
 
-    point_local: np.ndarray
-    pivot: np.ndarray
+    anchor: np.ndarray
+    base_rotation: np.ndarray
+    object_rotation: np.ndarray
+    relative_offset: np.ndarray
 
 
-def probe_anchor(ctx: ProbeContext) -> ProbeAnchor:
-    """The anchor of the instant the simulation is at now."""
+def _rotation(orn) -> np.ndarray:
+    return np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+
+
+def anchor_point(ctx: ProbeContext) -> np.ndarray:
+    """The anchor of the instant the simulation is at now, in the base's COM frame."""
     cid = ctx.client
     com, orn = p.getBasePositionAndOrientation(ctx.hand_body, physicsClientId=cid)
-    rot0 = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
-    pivot = np.array(p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)[0])
-    return ProbeAnchor(point_local=rot0.T @ (pivot - np.array(com)), pivot=pivot)
+    pivot = p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)[0]
+    return _rotation(orn).T @ (np.array(pivot) - np.array(com))
 
 
-def response(ctx: ProbeContext, anchor: ProbeAnchor) -> tuple[np.ndarray, np.ndarray]:
-    """Velocities now of the gripper (at the anchor point) and of the object."""
-    return _velocities(ctx, anchor.point_local)
+def snapshot(ctx: ProbeContext, anchor_local: np.ndarray) -> Snapshot:
+    cid = ctx.client
+    com, orn = p.getBasePositionAndOrientation(ctx.hand_body, physicsClientId=cid)
+    o_pos, o_orn = p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)
+    rot = _rotation(orn)
+    anchor = np.array(com) + rot @ anchor_local
+    return Snapshot(anchor=anchor, base_rotation=rot, object_rotation=_rotation(o_orn),
+                    relative_offset=np.array(o_pos) - anchor)
 
 
-def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
-                  epsilon: float, length: float, central: bool = False, *,
-                  state: int | None = None) -> float:
-    """Quality 1 − σ_max(G − I) at trajectory step `step`.
+def responses(perturbed: Snapshot, reference: Snapshot) -> tuple[np.ndarray, np.ndarray]:
+    """(base, relative) 6-vectors [linear; angular] of one perturbed rollout, world axes.
+
+    The relative pose is kept in world axes, not the hand's: every pybullet constraint and
+    contact lags its load by about a·dt² (the velocity-level solver corrects positions a step
+    late), a world-fixed sag under gravity that a hand-frame reading would turn with the
+    hand's angular probe and report as relative motion (0.01–0.02 of μs on a weld)."""
+    base_turn = perturbed.base_rotation @ reference.base_rotation.T
+    object_turn = perturbed.object_rotation @ reference.object_rotation.T
+    base = np.concatenate([perturbed.anchor - reference.anchor, rotation_vector(base_turn)])
+    relative = np.concatenate([
+        perturbed.relative_offset - reference.relative_offset,
+        rotation_vector(object_turn @ base_turn.T),  # identity for an object fixed to the hand
+    ])
+    return base, relative
+
+
+def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSettings,
+                  length: float, *, state: int | None = None) -> float:
+    """Quality 1 − σ_max(S) at trajectory step `step`.
 
     `state`: a saved state of this instant to roll out from (otherwise the present state is
     saved first). Every rollout, the unperturbed one included, starts from it through
-    `restore_clean`, so all seven see the same start; the state is restored at the end.
+    `restore_clean`, so all see the same start; the state is restored at the end.
+    With `metric.differences == "central"`, ±ε rollouts instead of +ε and an unperturbed one:
+    the perturbation's even-order effects cancel (12 rollouts instead of 7).
     """
     cid = ctx.client
+    window = metric.window_steps
+    central = metric.differences == "central"
+    linear = metric.perturbation_m_s2
+    angular = metric.angular_perturbation_rad_s2
     own_state = state is None
     if own_state:
         state = p.saveState(physicsClientId=cid)
     restore_clean(ctx, state)
-    anchor = probe_anchor(ctx)
-    pivot = anchor.pivot
+    anchor_local = anchor_point(ctx)
+    pivot = np.array(p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)[0])
 
-    def rollout(axis: int | None, sign: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    def rollout(axis: int | None, sign: float = 1.0) -> Snapshot:
         restore_clean(ctx, state)
         for j in range(1, window + 1):
             position, rotation = ctx.target(step + j)
@@ -110,33 +148,26 @@ def probe_instant(ctx: ProbeContext, step: int, window: int, dt: float,
                 amount = sign * 0.5 * (j * dt) ** 2
                 if axis < 3:
                     offset = np.zeros(3)
-                    offset[axis] = epsilon * amount
+                    offset[axis] = linear * amount
                     position = position + offset
                 else:
-                    turn = axis_rotation(axis - 3, epsilon / length * amount)
+                    turn = axis_rotation(axis - 3, angular * amount)
                     position = pivot + turn @ (position - pivot)
                     rotation = turn @ rotation
             ctx.drive(position, rotation)
             p.stepSimulation(physicsClientId=cid)
-        return response(ctx, anchor)
+        return snapshot(ctx, anchor_local)
 
     try:
-        span = window * dt
-        d_ref = np.empty((6, 6))
-        d_obj = np.empty((6, 6))
-        if not central:
-            ref0, obj0 = rollout(None)
+        d_base = np.empty((6, 6))
+        d_rel = np.empty((6, 6))
+        reference = None if central else rollout(None)
         for axis in range(6):
-            ref, obj = rollout(axis)
-            if central:  # ±ε: even-order effects of the perturbation cancel
-                ref0, obj0 = rollout(axis, -1.0)
-                ref, obj = (ref - ref0) / 2, (obj - obj0) / 2
-            else:
-                ref, obj = ref - ref0, obj - obj0
-            d_ref[:, axis] = ref / span
-            d_obj[:, axis] = obj / span
+            if central:
+                reference = rollout(axis, -1.0)
+            d_base[:, axis], d_rel[:, axis] = responses(rollout(axis), reference)
     finally:
         restore_clean(ctx, state)
         if own_state:
             p.removeState(state, physicsClientId=cid)
-    return instant_quality(sensitivity_matrix(d_ref, d_obj, length))
+    return instant_quality_of_deviation(deviation_matrix(d_base, d_rel, length))
