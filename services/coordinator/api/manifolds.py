@@ -74,7 +74,8 @@ def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
     "/explorations/{exploration_id}/best",
     response_model=BestOut,
     responses={**_NOT_FOUND, 422: {"description": "inconsistent constraints"}},
-    summary="The best grasps (highest μs), overall or in one manifold, under constraints",
+    summary="The best grasps (by μs, or another metric with rank=), overall or in one "
+    "manifold, under constraints",
 )
 def best(
     exploration_id: Id,
@@ -87,6 +88,10 @@ def best(
     cone_half_angle_deg: Annotated[float | None, Query(ge=0.0, le=180.0)] = None,
     max_effort_nm: Annotated[float | None, Query(ge=0.0, le=1e6, allow_inf_nan=False)] = None,
     limit: Annotated[int, Query(ge=1, le=100)] = 1,
+    rank: Annotated[manifolds.Rank, Query(
+        description="rank by μs, a static metric (mu_g, mu_f, mu_m) or a robustness margin or "
+        "test; highest first, except torque_margin_nm and friction_margin (lowest first); "
+        "poses without the value come last, ties by μs")] = manifolds.DEFAULT_RANK,
 ) -> Any:
     axis_given = [c is not None for c in (cone_x, cone_y, cone_z)]
     axis = None
@@ -106,7 +111,7 @@ def best(
         cone_axis=axis,
         cone_half_angle=math.radians(cone_half_angle_deg) if cone_half_angle_deg is not None
         else None,
-        max_effort_nm=max_effort_nm, limit=limit,
+        max_effort_nm=max_effort_nm, limit=limit, rank=rank,
     )
     return BestOut(exploration_id=exploration_id, manifold=manifold,
                    poses=[PoseOut.model_validate(r) for r in rows])

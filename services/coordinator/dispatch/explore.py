@@ -29,6 +29,7 @@ from graspscape.services.coordinator.maps.picture import write_map_files
 from graspscape.services.coordinator.objects.service import create_named, create_uploaded
 from graspscape.services.coordinator.settings import Settings, ZenohSettings
 from graspscape.services.coordinator.store.models import (
+    POSE_METRIC_COLUMNS,
     ExplorationRow,
     ExplorationStatus,
     PoseRow,
@@ -102,7 +103,7 @@ def _bar(done: int, total: int, viable: int, rate: float, width: int = 30) -> st
 
 def _export_csv(session: Session, exploration_id: int, path: Path) -> int:
     columns = ("pose_key", "theta", "phi", "r", "roll", "pitch", "yaw", "outcome", "viable",
-               "mu_s", "effort_max_nm", "eval_time_s")
+               "mu_s", "effort_max_nm", "eval_time_s", *POSE_METRIC_COLUMNS)
     rows = session.execute(
         select(*(getattr(PoseRow, c) for c in columns))
         .where(PoseRow.exploration_id == exploration_id)

@@ -34,6 +34,7 @@ from graspscape.services.coordinator.exploration.tiling import TilePlan, coarse_
 from graspscape.services.coordinator.manifolds.behaviour import Sample
 from graspscape.services.coordinator.store.dialect import insert_for
 from graspscape.services.coordinator.store.models import (
+    POSE_METRIC_COLUMNS,
     TERMINAL_TILE_STATES,
     ExplorationRow,
     ExplorationStatus,
@@ -288,6 +289,8 @@ def _store_inferred(session: Session, exploration_id: int, inferences: list[Infe
             "contacts_per_link": src.contacts_per_link, "signature": src.signature,
             "grasp": src.grasp, "worker_id": f"shortcut:{inf.reason}", "eval_time_s": 0.0,
             "created_at": now,
+            # The source's grasp metrics and margins, like its μs (none changes under a mirror).
+            **{name: getattr(src, name) for name in POSE_METRIC_COLUMNS},
         }
         for sym in (paths or {}).get(inf.point, ()):
             row = symmetry.mirror_result(row, sym, hand)

@@ -78,6 +78,25 @@ class PoseOut(BaseModel):
     worker_id: str | None
     eval_time_s: float
     created_at: datetime
+    # Null where the worker did not compute the value (see SimSettings; held poses only).
+    mu_g: float | None = Field(default=None, description="grasp-matrix metric μg")
+    mu_f: float | None = Field(default=None, description="Ferrari–Canny ε (μf)")
+    mu_m: float | None = Field(default=None, description="perturbation resistance μm, "
+                               "in object weights")
+    torque_margin_nm: float | None = Field(
+        default=None, description="least closing effort at which the grasp still holds, N·m")
+    torque_margin_ratio: float | None = Field(
+        default=None, description="1 − torque_margin_nm / the closing effort used")
+    friction_margin: float | None = Field(
+        default=None, description="least object friction coefficient that still holds")
+    gravity_test_share: float | None = Field(
+        default=None, description="share of the 6 gravity directions passed")
+    force_test_share: float | None = Field(
+        default=None, description="share of the 6 external force directions passed")
+    tug_force_n: float | None = Field(
+        default=None, description="pull along the approach axis at which the object slips, N")
+    shake_survival_s: float | None = Field(
+        default=None, description="time into the shake at which the object falls off, s")
 
 
 class PosePage(BaseModel):

@@ -2,7 +2,9 @@
 
 Pose rows are flat: the pose, its outcome and μs, effort, the manifold label (letters, empty
 when none), where the result came from (evaluated by a worker or a shortcut), the digits in
-contact, and the grasp configuration and signature as JSON text.
+contact, the grasp configuration and signature as JSON text, then the static grasp metrics
+(μg, μf, μm) and the robustness margins and tests (empty in CSV, null in Parquet, where the
+worker did not compute them).
 """
 
 from __future__ import annotations
@@ -14,7 +16,11 @@ from typing import Any
 
 from graspscape.services.coordinator.manifolds.behaviour import source_of
 from graspscape.services.coordinator.manifolds.grouping import label_name
-from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
+from graspscape.services.coordinator.store.models import (
+    POSE_METRIC_COLUMNS,
+    ManifoldRow,
+    PoseRow,
+)
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
@@ -22,7 +28,7 @@ COLUMNS = (
     "pose_key", "theta", "phi", "r", "roll", "pitch", "yaw", "outcome", "viable", "mu_s",
     "effort_max_nm", "effective_r", "manifold", "source", "inferred_from", "links_in_contact",
     "grasp",
-    "signature", "eval_time_s",
+    "signature", "eval_time_s", *POSE_METRIC_COLUMNS,
 )
 
 
@@ -51,6 +57,7 @@ def pose_records(session: Session, exploration_id: int) -> list[dict[str, Any]]:
             "grasp": json.dumps(row.grasp, sort_keys=True) if row.grasp else "",
             "signature": json.dumps(row.signature, sort_keys=True) if row.signature else "",
             "eval_time_s": row.eval_time_s,
+            **{name: getattr(row, name) for name in POSE_METRIC_COLUMNS},
         })
     return out
 
@@ -70,7 +77,7 @@ def poses_parquet(records: list[dict[str, Any]]) -> bytes:
     types = {
         "viable": pa.bool_(), "effective_r": pa.float64(),
         **{c: pa.float64() for c in ("theta", "phi", "r", "roll", "pitch", "yaw", "mu_s",
-                                     "effort_max_nm", "eval_time_s")},
+                                     "effort_max_nm", "eval_time_s", *POSE_METRIC_COLUMNS)},
     }
     schema = pa.schema([(c, types.get(c, pa.string())) for c in COLUMNS])
     table = pa.Table.from_pylist(records, schema=schema)

@@ -13,6 +13,7 @@ import functools
 import logging
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -252,6 +253,29 @@ def approach_vector(theta: float, phi: float) -> tuple[float, float, float]:
     return (-st * math.cos(phi), -st * math.sin(phi), -math.cos(theta))
 
 
+class Rank(StrEnum):
+    """What `best_poses` ranks by: μs, a static grasp metric, or a stored robustness margin or
+    grasp test (the poses' columns of the same name)."""
+
+    MU_S = "mu_s"
+    MU_G = "mu_g"
+    MU_F = "mu_f"
+    MU_M = "mu_m"
+    TORQUE_MARGIN_NM = "torque_margin_nm"
+    TORQUE_MARGIN_RATIO = "torque_margin_ratio"
+    FRICTION_MARGIN = "friction_margin"
+    GRAVITY_TEST_SHARE = "gravity_test_share"
+    FORCE_TEST_SHARE = "force_test_share"
+    TUG_FORCE_N = "tug_force_n"
+    SHAKE_SURVIVAL_S = "shake_survival_s"
+
+
+# The ranking of /best and best_poses when none is asked for (one line to change).
+DEFAULT_RANK = Rank.MU_S
+# Where a lower value is the better grasp: it still holds with less friction or less effort.
+LOWER_IS_BETTER = frozenset({Rank.FRICTION_MARGIN, Rank.TORQUE_MARGIN_NM})
+
+
 def best_poses(
     session: Session,
     exploration_id: int,
@@ -261,9 +285,14 @@ def best_poses(
     cone_half_angle: float | None = None,
     max_effort_nm: float | None = None,
     limit: int = 1,
+    rank: Rank | str = DEFAULT_RANK,
 ) -> list[PoseRow]:
-    """Viable poses by μs (desc, then key), optionally inside one manifold, an approach cone,
-    and below a joint effort."""
+    """Viable poses, best first by `rank` (then μs desc, then key), optionally inside one
+    manifold, an approach cone, and below a joint effort.
+
+    Higher is better except for the LOWER_IS_BETTER ranks; poses without the ranking value
+    (NULL: the test was not run) come after every pose that has it."""
+    rank = Rank(rank)
     if session.get(ExplorationRow, exploration_id) is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
     query = select(PoseRow).where(PoseRow.exploration_id == exploration_id, PoseRow.viable)
@@ -275,7 +304,12 @@ def best_poses(
         query = query.where(PoseRow.manifold_id == mid)
     if max_effort_nm is not None:
         query = query.where(PoseRow.effort_max_nm <= max_effort_nm)
-    query = query.order_by(PoseRow.mu_s.desc(), PoseRow.pose_key)
+    if rank == Rank.MU_S:
+        query = query.order_by(PoseRow.mu_s.desc(), PoseRow.pose_key)
+    else:
+        column = getattr(PoseRow, rank.value)
+        first = column.asc() if rank in LOWER_IS_BETTER else column.desc()
+        query = query.order_by(first.nulls_last(), PoseRow.mu_s.desc(), PoseRow.pose_key)
     out: list[PoseRow] = []
     axis = None
     if cone_axis is not None:

@@ -20,6 +20,8 @@ from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.adaptive import after_ingest
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
+    POSE_METRIC_COLUMNS,
+    ROBUSTNESS_COLUMNS,
     ExplorationRow,
     PoseRow,
     TileRow,
@@ -52,10 +54,14 @@ def _json_text(model: BaseModel | None) -> str | None:
     return text
 
 
-def _values(result: PoseResult) -> tuple[Any, ...]:
-    """The per-pose columns of one result, in _PER_POSE order, as the driver takes them."""
+_NO_ROBUSTNESS: tuple[None, ...] = (None,) * len(ROBUSTNESS_COLUMNS)
+
+
+def _values(result: PoseResult, robustness: bool = True) -> tuple[Any, ...]:
+    """The per-pose columns of one result, in _PER_POSE order, as the driver takes them;
+    without `robustness`, all but the trailing ROBUSTNESS_COLUMNS (left NULL)."""
     pose = result.pose
-    return (
+    values = (
         result.pose_key,
         pose.theta,
         pose.phi,
@@ -73,6 +79,24 @@ def _values(result: PoseResult) -> tuple[Any, ...]:
         _json_text(result.grasp),
         result.eval_time_s,
         result.inferred_from,
+        result.mu_g,
+        result.mu_f,
+        result.mu_m,
+    )
+    if not robustness:
+        return values
+    rb = result.robustness
+    if rb is None:
+        return values + _NO_ROBUSTNESS
+    return (
+        *values,
+        rb.torque_margin_nm,
+        rb.torque_margin_ratio,
+        rb.friction_margin,
+        rb.gravity_test_share,
+        rb.force_test_share,
+        rb.tug_force_n,
+        rb.shake_survival_s,
     )
 
 
@@ -94,44 +118,60 @@ _PER_POSE = (
     ("grasp", "text"),
     ("eval_time_s", "float8"),
     ("inferred_from", "varchar"),
+    *((name, "float8") for name in POSE_METRIC_COLUMNS),
 )
+# The robustness tests are chosen per exploration and off by default: a batch without any
+# report leaves their columns out of the statement (NULL), which spares SQLite a quarter of
+# its parameters per row and PostgreSQL seven arrays of nulls.
+_WITHOUT_ROBUSTNESS = _PER_POSE[: len(_PER_POSE) - len(ROBUSTNESS_COLUMNS)]
+assert tuple(name for name, _ in _PER_POSE[len(_WITHOUT_ROBUSTNESS):]) == ROBUSTNESS_COLUMNS
 _PER_BATCH = ("exploration_id", "tile_id", "worker_id", "created_at")
 _CONFLICT = "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"
 _JSON_COLUMNS = ("contacts_per_link", "signature", "grasp")
-_PG_INSERT = (
-    "INSERT INTO poses ({columns}) SELECT {batch}, {select} FROM unnest({arrays}) AS u({names}) "
-    "{conflict}"
-).format(
-    columns=", ".join(_PER_BATCH + tuple(name for name, _ in _PER_POSE)),
-    batch=", ".join(f"%({name})s" for name in _PER_BATCH),
-    select=", ".join(
-        f"u.{name}::json" if name in _JSON_COLUMNS else f"u.{name}" for name, _ in _PER_POSE
-    ),
-    # %(...)b: binary parameters, which psycopg dumps without escaping each array element.
-    arrays=", ".join(f"%({name})b::{sql_type}[]" for name, sql_type in _PER_POSE),
-    names=", ".join(name for name, _ in _PER_POSE),
-    conflict=_CONFLICT,
-)
-_N_COLUMNS = len(_PER_BATCH) + len(_PER_POSE)
 
 
-@lru_cache(maxsize=32)
-def _sqlite_insert(n_rows: int) -> str:
+def _pg_insert(per_pose: tuple[tuple[str, str], ...]) -> str:
+    return (
+        "INSERT INTO poses ({columns}) SELECT {batch}, {select} FROM unnest({arrays}) "
+        "AS u({names}) {conflict}"
+    ).format(
+        columns=", ".join(_PER_BATCH + tuple(name for name, _ in per_pose)),
+        batch=", ".join(f"%({name})s" for name in _PER_BATCH),
+        select=", ".join(
+            f"u.{name}::json" if name in _JSON_COLUMNS else f"u.{name}" for name, _ in per_pose
+        ),
+        # %(...)b: binary parameters, which psycopg dumps without escaping each array element.
+        arrays=", ".join(f"%({name})b::{sql_type}[]" for name, sql_type in per_pose),
+        names=", ".join(name for name, _ in per_pose),
+        conflict=_CONFLICT,
+    )
+
+
+# By whether the batch has robustness columns.
+_COLUMNS = {True: _PER_POSE, False: _WITHOUT_ROBUSTNESS}
+_PG_INSERT = {robustness: _pg_insert(per_pose) for robustness, per_pose in _COLUMNS.items()}
+
+
+@lru_cache(maxsize=64)
+def _sqlite_insert(n_rows: int, robustness: bool = True) -> str:
     """SQLite: one multi-row VALUES statement (its text is cached by row count, its prepared
     form by the driver)."""
-    row = "(" + ", ".join("?" * _N_COLUMNS) + ")"
-    columns = ", ".join(_PER_BATCH + tuple(name for name, _ in _PER_POSE))
+    per_pose = _COLUMNS[robustness]
+    row = "(" + ", ".join("?" * (len(_PER_BATCH) + len(per_pose))) + ")"
+    columns = ", ".join(_PER_BATCH + tuple(name for name, _ in per_pose))
     return f"INSERT INTO poses ({columns}) VALUES {', '.join([row] * n_rows)} {_CONFLICT}"
 
 
-def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, ...]]
-                ) -> list[bool]:
+def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, ...]],
+                robustness: bool = True) -> list[bool]:
     """Insert the rows not stored yet; return the `viable` flag of each row inserted.
 
-    `batch`: the _PER_BATCH values, the same for every row; `rows`: _values() of each result.
+    `batch`: the _PER_BATCH values, the same for every row; `rows`: _values() of each result,
+    with or without the robustness columns as `robustness` says.
     Both backends get one driver-level statement per batch: SQLAlchemy's per-row parameter
     processing (JSON, datetime) took more time than the database itself.
     """
+    per_pose = _COLUMNS[robustness]
     connection = session.connection()
     dialect = connection.dialect
     # The timestamp as the ORM would bind it (UTC; on SQLite the store's text form).
@@ -144,15 +184,16 @@ def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, 
         # on every batch, which took half of the ingest time. (One JSON array of the rows
         # instead saved little client time and cost the server more than that.)
         params: dict[str, Any] = dict(zip(_PER_BATCH, batch, strict=True))
-        for (name, _), column in zip(_PER_POSE, zip(*rows, strict=True), strict=True):
+        for (name, _), column in zip(per_pose, zip(*rows, strict=True), strict=True):
             params[name] = list(column)
-        result = connection.exec_driver_sql(_PG_INSERT, params)
+        result = connection.exec_driver_sql(_PG_INSERT[robustness], params)
         return [bool(v) for (v,) in result]
     if dialect.name != "sqlite":
         raise RuntimeError(f"unsupported database dialect {dialect.name!r}")
     # As many rows per statement as the SQLite build takes parameters (32,766, or 999 before
     # 3.32), as SQLAlchemy's own multi-row inserts do.
-    per_statement = max(1, dialect.insertmanyvalues_max_parameters // _N_COLUMNS)
+    per_statement = max(
+        1, dialect.insertmanyvalues_max_parameters // (len(_PER_BATCH) + len(per_pose)))
     viable: list[bool] = []
     for start in range(0, len(rows), per_statement):
         chunk = rows[start : start + per_statement]
@@ -160,7 +201,8 @@ def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, 
         for row in chunk:
             params_flat += batch
             params_flat += row
-        result = connection.exec_driver_sql(_sqlite_insert(len(chunk)), tuple(params_flat))
+        result = connection.exec_driver_sql(
+            _sqlite_insert(len(chunk), robustness), tuple(params_flat))
         viable += [bool(v) for (v,) in result]
     return viable
 
@@ -217,6 +259,7 @@ def ingest_results(
         session.rollback()
         raise NotFound(f"tile {tile_id} does not exist (was its exploration deleted?)")
     rows: dict[str, tuple[Any, ...]] = {}
+    robustness = any(result.robustness is not None for result in results)
     for result in results:
         key = result.pose.key()
         if result.pose_key != key:
@@ -224,12 +267,13 @@ def ingest_results(
             raise InvalidInput(
                 f"result pose_key {result.pose_key!r} does not match its pose (key {key!r})"
             )
-        rows[key] = _values(result)
+        rows[key] = _values(result, robustness)
 
     inserted = viable = 0
     if rows:
         returned = _insert_new(
-            session, (tile.exploration_id, tile_id, worker_id, now), list(rows.values())
+            session, (tile.exploration_id, tile_id, worker_id, now), list(rows.values()),
+            robustness,
         )
         inserted = len(returned)
         viable = sum(1 for v in returned if v)

@@ -178,7 +178,34 @@ class PoseRow(Base):
     eval_time_s: Mapped[float] = mapped_column(Float)
     # Shortcut 2: the pose whose outcome, μs and effort this one reuses (same tile and normal).
     inferred_from: Mapped[str | None] = mapped_column(String(128))
+    # Static grasp metrics of the synthesized grasp (PoseResult.mu_g, mu_f, mu_m) and its
+    # robustness margins and grasp tests (PoseResult.robustness, migration 0005): NULL where
+    # the worker did not compute them (not chosen in SimSettings, or the pose was not held).
+    mu_g: Mapped[float | None] = mapped_column(Float)
+    mu_f: Mapped[float | None] = mapped_column(Float)
+    mu_m: Mapped[float | None] = mapped_column(Float)
+    torque_margin_nm: Mapped[float | None] = mapped_column(Float)
+    torque_margin_ratio: Mapped[float | None] = mapped_column(Float)
+    friction_margin: Mapped[float | None] = mapped_column(Float)
+    gravity_test_share: Mapped[float | None] = mapped_column(Float)
+    force_test_share: Mapped[float | None] = mapped_column(Float)
+    tug_force_n: Mapped[float | None] = mapped_column(Float)
+    shake_survival_s: Mapped[float | None] = mapped_column(Float)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+# The columns above, in this order: the static metrics, then RobustnessReport's fields.
+GRASP_METRIC_COLUMNS = ("mu_g", "mu_f", "mu_m")
+ROBUSTNESS_COLUMNS = (
+    "torque_margin_nm",
+    "torque_margin_ratio",
+    "friction_margin",
+    "gravity_test_share",
+    "force_test_share",
+    "tug_force_n",
+    "shake_survival_s",
+)
+POSE_METRIC_COLUMNS = GRASP_METRIC_COLUMNS + ROBUSTNESS_COLUMNS
 
 
 class WorkerRow(Base):
