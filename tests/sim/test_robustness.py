@@ -257,3 +257,17 @@ def test_eval_pose_command_prints_the_report(sim_cache, monkeypatch, capsys):
     assert report["tug_force_n"] > 0.0 and report["shake_survival_s"] > 0.0
     assert {key for key, value in report.items() if value is None} == set(
         RobustnessReport.model_fields) - {"tug_force_n", "shake_survival_s"}
+
+
+def test_tests_chosen_in_the_settings_run_on_every_held_evaluation(make_evaluator):
+    from graspscape.shared.specs.sim import SimSettings
+
+    settings = SimSettings(robustness=RobustnessSettings(tests=("torque_margin",)))
+    evaluator = make_evaluator("sphere", settings=settings)
+    held = evaluator.evaluate(FROM_ABOVE)
+    assert held.outcome is Outcome.HELD
+    assert held.robustness is not None and held.robustness.torque_margin_ratio is not None
+    assert held.robustness.gravity_test_share is None  # not chosen
+    empty = evaluator.evaluate(Pose(theta=0.0, phi=0.0, r=0.5))  # the open hand touches nothing
+    assert empty.outcome is not Outcome.HELD
+    assert empty.robustness == RobustnessReport()

@@ -200,8 +200,12 @@ class Evaluator:
         """Simulates one pose. With `picture`, a PNG of the synthesized grasp (before the
         trajectory) is written there. With `donors` (shortcut 2), a synthesized grasp that
         matches a donor's reuses its outcome, μs and effort; one taken through the trajectory
-        joins the donors."""
-        return self._evaluate(pose, picture=picture, donors=donors)[0]
+        joins the donors. The tests of `settings.robustness` (none by default) run on the
+        synthesized grasp of every pose that held and was simulated (not inferred)."""
+        chosen = self.settings.robustness
+        if not chosen.tests:
+            return self._evaluate(pose, picture=picture, donors=donors)[0]
+        return self.robustness(pose, chosen, picture=picture, donors=donors)[0]
 
     def _evaluate(self, pose: Pose, *, picture: Path | None = None,
                   donors: DonorPool | None = None, keep_grasp: bool = False,
@@ -262,10 +266,12 @@ class Evaluator:
 
     # --- robustness (workers/sim/robustness.py) ------------------------------------------
     @contextmanager
-    def synthesized(self, pose: Pose) -> Iterator[tuple[PoseResult, SynthesizedGrasp | None]]:
+    def synthesized(self, pose: Pose, *, picture: Path | None = None,
+                    donors: DonorPool | None = None,
+                    ) -> Iterator[tuple[PoseResult, SynthesizedGrasp | None]]:
         """Evaluates `pose` as `evaluate` does and yields its result with the synthesized grasp
         (None where no grasp formed), whose saved state is removed on leaving the block."""
-        result, grasp = self._evaluate(pose, keep_grasp=True)
+        result, grasp = self._evaluate(pose, picture=picture, donors=donors, keep_grasp=True)
         try:
             yield result, grasp
         finally:
@@ -312,15 +318,18 @@ class Evaluator:
                              physicsClientId=self.client)
         return held
 
-    def robustness(self, pose: Pose, settings: RobustnessSettings | None = None,
+    def robustness(self, pose: Pose, settings: RobustnessSettings | None = None, *,
+                   picture: Path | None = None, donors: DonorPool | None = None,
                    ) -> tuple[PoseResult, RobustnessReport]:
         """Evaluates `pose` as `evaluate` does and, if it held, runs the chosen tests
         (`settings`; None: every test) on its synthesized grasp. The result carries the report
-        in `robustness`; where the pose did not hold every field of the report is None."""
+        in `robustness`; where the pose did not hold, or its outcome was inferred from a donor,
+        every field of the report is None."""
         settings = settings or RobustnessSettings.every_test()
-        with self.synthesized(pose) as (result, grasp):
+        with self.synthesized(pose, picture=picture, donors=donors) as (result, grasp):
             report = RobustnessReport()
-            if grasp is not None and result.outcome is Outcome.HELD:
+            if (grasp is not None and result.outcome is Outcome.HELD
+                    and result.inferred_from is None):
                 report = run_tests(self, grasp, settings)
         return result.model_copy(update={"robustness": report}), report
 
