@@ -3,7 +3,8 @@
 For a fixed set of held grasps (sphere and mug), μs is computed with the default metric
 settings and with each of instants, window, perturbation size (linear and angular) and
 characteristic length halved, and with the object moved by 1 µm, by (0.5, −0.3, 0.2) m and by
-(10, 10, 1) m.
+(10, 10, 1) m; and the estimator's anchor, a weld (workers/sim/calibration.py): its lowest
+per-instant reading on each calibration object and its spread over the three places.
 Reports, per variant, the mean |Δμs| and the Spearman rank correlation with the default.
 
     .venv/bin/python benchmarks/bench_metric_stability.py   # writes results/metric_stability.json
@@ -18,6 +19,11 @@ from graspscape.shared.specs.gripper import load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.sim import MetricSettings, SimSettings
+from graspscape.workers.sim.calibration import (
+    CALIBRATION_OBJECTS,
+    CALIBRATION_POSES,
+    weld_reading,
+)
 from graspscape.workers.sim.evaluate import Evaluator, default_cache_dir
 from graspscape.workers.sim.objects import prepare_object
 from scipy.stats import spearmanr
@@ -49,6 +55,34 @@ def mu_values(metric: MetricSettings, length_factor: float = 1.0,
     return values
 
 
+def weld_figures() -> dict[str, float]:
+    """The estimator's anchor: the lowest per-instant reading of a weld, per object, and the
+    spread of a weld's μs over three places of the object in the world."""
+    figures: dict[str, float] = {}
+    lowest = 1.0
+    for name, scale in CALIBRATION_OBJECTS:
+        prepared = prepare_object(ObjectSpec(name=name, scale=scale),
+                                  default_cache_dir() / "objects")
+        with Evaluator(prepared, load_gripper("robotiq_3f"), work_dir=default_cache_dir(),
+                       ) as evaluator:
+            readings = [q for pose in CALIBRATION_POSES for q in weld_reading(evaluator, pose)]
+        label = name if scale == 1.0 else f"{name}_x{scale:g}"
+        figures[f"weld_lowest_instant_quality.{label}"] = min(readings)
+        lowest = min(lowest, min(readings))
+    figures["weld_lowest_instant_quality"] = lowest
+    prepared = prepare_object(ObjectSpec(name="mug"), default_cache_dir() / "objects")
+    spread = 0.0
+    for pose in CALIBRATION_POSES[1:]:
+        values = []
+        for offset in [(0.0, 0.0, 0.0), (0.5, -0.3, 0.2), (10.0, 10.0, 1.0)]:
+            with Evaluator(prepared, load_gripper("robotiq_3f"), work_dir=default_cache_dir(),
+                           world_offset=offset) as evaluator:
+                values.append(min(weld_reading(evaluator, pose)))
+        spread = max(spread, max(values) - min(values))
+    figures["weld_mu_s_spread_over_world_offsets_mug"] = spread
+    return figures
+
+
 def main() -> None:
     base = MetricSettings()
     variants = {
@@ -62,7 +96,8 @@ def main() -> None:
     held = reference > 0
     figures: dict[str, float] = {"grasps": float(len(reference)),
                                  "held_grasps": float(held.sum()),
-                                 "mean_mu_s_default": float(reference[held].mean())}
+                                 "mean_mu_s_default": float(reference[held].mean()),
+                                 **weld_figures()}
     variants_values = {name: mu_values(metric) for name, metric in variants.items()}
     variants_values["length"] = mu_values(base, length_factor=0.5)  # half the radius of gyration
     variants_values["moved_1um"] = mu_values(base, world_offset=(1e-6, 0.0, 0.0))

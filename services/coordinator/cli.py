@@ -73,6 +73,8 @@ def _explore(args: argparse.Namespace) -> int:
         "data_dir": args.data_dir,
         "mass_kg": args.mass,
         "friction": args.friction,
+        "robustness": None if args.robustness is None else tuple(
+            t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
         "quiet": args.quiet,
     }
     return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
@@ -173,6 +175,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     explore.add_argument("--mass", type=float, help="object mass, kg")
     explore.add_argument("--friction", type=float, help="object friction coefficient")
+    explore.add_argument(
+        "--robustness", metavar="TESTS",
+        help="robustness tests run on every held pose, comma-separated "
+        "(torque_margin, friction_margin, gravity, force, tug, shake), or 'none'; "
+        "default: the exploration spec's")
     explore.add_argument("--quiet", action="store_true", help="no progress bar")
     explore.set_defaults(handler=_explore)
 

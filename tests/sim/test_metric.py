@@ -9,6 +9,11 @@ import numpy as np
 import pybullet as p
 import pytest
 from graspscape.shared.specs.pose import Pose
+from graspscape.workers.sim.calibration import (
+    CALIBRATION_OBJECTS,
+    CALIBRATION_POSES,
+    weld_reading,
+)
 from graspscape.workers.sim.metric import instant_quality, mu_s, sensitivity_matrix
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.trajectory import min_jerk, reference_pose
@@ -36,10 +41,7 @@ def test_minimum_jerk_profile_starts_and_ends_at_rest():
 
 def _held_scene(evaluator, pose):
     evaluator._reset()
-    start = evaluator._start_pose(pose)
-    if start is None:
-        return None  # infeasible: the open hand cannot be placed there
-    position, rotation, _, _ = start
+    position, rotation, _, _ = evaluator._start_pose(pose)
     evaluator._place(position, rotation)
     return evaluator.scene
 
@@ -50,51 +52,7 @@ def probe_evaluator(make_evaluator):
     return make_evaluator("sphere")
 
 
-def _weld_and_probe(evaluator, pose) -> list[float]:
-    """Places the hand, welds the object to the palm where it is (collisions between them off,
-    so nothing but the weld acts), releases it under gravity and probes every instant the
-    evaluator's trajectory would, driving the hand along the reference path in between.
-    [] where the pose is infeasible."""
-    scene = _held_scene(evaluator, pose)
-    if scene is None:
-        return []
-    cid, hand, obj = scene.client, scene.hand.body, scene.object_body
-    hp, ho = p.getBasePositionAndOrientation(hand, physicsClientId=cid)
-    op, oo = p.getBasePositionAndOrientation(obj, physicsClientId=cid)
-    relative = p.multiplyTransforms(*p.invertTransform(hp, ho), op, oo)
-    weld = p.createConstraint(hand, -1, obj, -1, p.JOINT_FIXED, [0, 0, 0], relative[0],
-                              [0, 0, 0], relative[1], physicsClientId=cid)
-    p.changeConstraint(weld, maxForce=1e5, physicsClientId=cid)
-    for link in scene.hand.link_names:
-        p.setCollisionFilterPair(hand, obj, link, -1, 0, physicsClientId=cid)
-    try:
-        p.changeConstraint(scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
-        p.setGravity(0, 0, -9.81, physicsClientId=cid)
-        spec, metric = evaluator.settings.trajectory, evaluator.settings.metric
-        start_pos, start_rot = scene.hand.frame_pose()
-        pivot = scene.object_pose()[0]
-        ctx = ProbeContext(client=cid, hand_body=hand, object_body=obj, drive=scene.drive_to,
-                           contact_free_state=evaluator.pristine,
-                           target=lambda step: reference_pose(spec, start_pos, start_rot, pivot,
-                                                              step * scene.dt))
-        n_steps = round(spec.duration_s / scene.dt)
-        instants = {int((k + 0.5) * n_steps / metric.instants) for k in range(metric.instants)}
-        qualities = []
-        for step in range(n_steps):
-            if step in instants:
-                qualities.append(probe_instant(ctx, step, scene.dt, metric, evaluator.length))
-            scene.drive_to(*ctx.target(step + 1))
-            scene.step()
-        return qualities
-    finally:
-        p.removeConstraint(weld, physicsClientId=cid)
-        for link in scene.hand.link_names:
-            p.setCollisionFilterPair(hand, obj, link, -1, 1, physicsClientId=cid)
-
-
-WELD_POSES = [Pose(theta=t, phi=f, r=0.02, roll=roll) for t, f, roll in
-              [(0.3, 0.0, 0.0), (1.57, 0.0, 0.0), (1.57, 1.0, 1.57), (2.0, 3.14, 0.0),
-               (1.0, 4.0, 0.8), (1.3, 2.2, 0.0), (2.6, 5.5, 1.0)]]
+WELD_POSES = CALIBRATION_POSES
 
 # A weld reads S = 0 by construction of the estimator (relative poses, ±ε); what is left is
 # pybullet's: a weld is a velocity-level constraint that lags the hand's turn along the moving
@@ -104,14 +62,13 @@ WELD_FLOOR = 0.97
 
 
 def test_object_welded_to_the_palm_gives_mu_s_near_one(probe_evaluator):
-    qualities = _weld_and_probe(probe_evaluator, WELD_POSES[1])
+    qualities = weld_reading(probe_evaluator, WELD_POSES[1])
     assert len(qualities) == probe_evaluator.settings.metric.instants
     assert min(qualities) > WELD_FLOOR
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name,scale", [("sphere", 1.0), ("cube", 1.0), ("can", 1.0),
-                                        ("mug", 1.0), ("sphere", 0.375)])
+@pytest.mark.parametrize("name,scale", CALIBRATION_OBJECTS)
 def test_weld_reads_near_one_at_every_instant_of_every_pose(name, scale, sim_cache):
     from graspscape.shared.specs.gripper import load_gripper
     from graspscape.shared.specs.objects import ObjectSpec
@@ -122,7 +79,7 @@ def test_weld_reads_near_one_at_every_instant_of_every_pose(name, scale, sim_cac
     probed = 0
     with Evaluator(prepared, load_gripper("robotiq_3f"), work_dir=sim_cache) as evaluator:
         for pose in WELD_POSES:
-            qualities = _weld_and_probe(evaluator, pose)
+            qualities = weld_reading(evaluator, pose)
             probed += bool(qualities)
             assert all(q > WELD_FLOOR for q in qualities), pose
     assert probed >= 5
@@ -130,7 +87,7 @@ def test_weld_reads_near_one_at_every_instant_of_every_pose(name, scale, sim_cac
 
 def test_a_weld_reads_the_same_wherever_the_object_stands(make_evaluator):
     pose = WELD_POSES[2]
-    readings = [min(_weld_and_probe(make_evaluator("mug", world_offset=offset), pose))
+    readings = [min(weld_reading(make_evaluator("mug", world_offset=offset), pose))
                 for offset in [(0.0, 0.0, 0.0), (0.5, -0.3, 0.2), (10.0, 10.0, 1.0)]]
     assert max(readings) - min(readings) <= 0.01
 

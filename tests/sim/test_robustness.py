@@ -271,3 +271,20 @@ def test_tests_chosen_in_the_settings_run_on_every_held_evaluation(make_evaluato
     empty = evaluator.evaluate(Pose(theta=0.0, phi=0.0, r=0.5))  # the open hand touches nothing
     assert empty.outcome is not Outcome.HELD
     assert empty.robustness == RobustnessReport()
+
+
+def test_a_fingertip_clamp_ranks_below_a_body_wrap_of_the_same_mug(mug_evaluator):
+    # The pair under the default task: a two-fingertip clamp of the rim (A_3 and B_3
+    # only) and the wrap of the body in docs/simulation.md's picture. Both hold, and μs cannot
+    # tell them apart (≈ 0.97 each); the margins can: the clamp needs most of its closing
+    # effort and all of its friction, the wrap little of either.
+    margins = RobustnessSettings(tests=("torque_margin", "friction_margin"))
+    clamp, clamp_report = mug_evaluator.robustness(
+        Pose(theta=1.0472, phi=6.0868, r=0.025), margins)
+    wrap, wrap_report = mug_evaluator.robustness(
+        Pose(theta=1.5708, phi=3.1416, r=0.02, roll=1.5708), margins)
+    assert clamp.outcome is Outcome.HELD and wrap.outcome is Outcome.HELD
+    assert set(clamp.signature.links_in_contact) == {"A_3", "B_3"}
+    assert "palm" in wrap.signature.links_in_contact
+    assert clamp_report.torque_margin_ratio < wrap_report.torque_margin_ratio
+    assert clamp_report.friction_margin > wrap_report.friction_margin

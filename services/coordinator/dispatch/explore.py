@@ -37,6 +37,7 @@ from graspscape.services.coordinator.store.models import (
     TileState,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
+from graspscape.shared.specs.robustness import TestName
 from graspscape.workers.runtime.config import WorkerConfig, default_procs
 from graspscape.workers.runtime.supervisor import Supervisor
 from pydantic import BaseModel, Field
@@ -57,6 +58,8 @@ class ExploreOptions(BaseModel):
     data_dir: Path = Path("data")
     mass_kg: float | None = None
     friction: float | None = None
+    robustness: tuple[TestName, ...] | None = Field(
+        default=None, description="robustness tests on every held pose; None: the spec's default")
     quiet: bool = False
 
 
@@ -137,6 +140,10 @@ def run_explore(opts: ExploreOptions) -> int:
         refinement=RefinementSpec(levels=opts.levels),
         label=f"graspscape explore {opts.object}",
     )
+    if opts.robustness is not None:
+        sim = spec.settings
+        spec = spec.model_copy(update={"settings": sim.model_copy(update={
+            "robustness": sim.robustness.model_copy(update={"tests": opts.robustness})})})
     with sessions() as session:
         spec = spec.model_copy(update={"object_id": _object_id(session, opts)})
         exploration_id, resumed = _exploration(session, spec, settings)
