@@ -13,6 +13,7 @@ import math
 from typing import Literal
 
 from graspscape.shared.specs.gripper import list_grippers
+from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import SimSettings
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -164,6 +165,12 @@ class ShortcutsSpec(BaseModel):
     )
 
 
+# An exploration measures the torque margin of every held pose unless told otherwise: it is
+# what /best ranks by (docs/metrics.md, "What /best ranks by"), at about one more evaluation's
+# worth of simulation per held pose.
+EXPLORATION_ROBUSTNESS = RobustnessSettings(tests=("torque_margin",))
+
+
 class ExplorationSpec(BaseModel):
     """One exploration as submitted: everything needed to reproduce it."""
 
@@ -177,9 +184,10 @@ class ExplorationSpec(BaseModel):
     )
     grid: PoseGridSpec = Field(default_factory=PoseGridSpec)
     settings: SimSettings = Field(
-        default_factory=SimSettings,
+        default_factory=lambda: SimSettings(robustness=EXPLORATION_ROBUSTNESS),
         description="what every pose evaluation depends on: policy (settings.policy_name), "
-        "trajectory, physics, metric, start-pose rule",
+        "trajectory, physics, metric, start-pose rule, and the robustness tests run on every "
+        "held pose (by default the torque margin, which /best ranks by)",
     )
     refinement: RefinementSpec = Field(default_factory=RefinementSpec)
     shortcuts: ShortcutsSpec = Field(default_factory=ShortcutsSpec)
@@ -194,6 +202,17 @@ class ExplorationSpec(BaseModel):
         if name not in known:
             raise ValueError(f"unknown gripper {name!r}; known: {', '.join(known)}")
         return name
+
+    @field_validator("settings", mode="before")
+    @classmethod
+    def _exploration_robustness(cls, settings: object) -> object:
+        # Settings that do not say which robustness tests to run get the exploration's
+        # default, whether given as JSON or as a SimSettings.
+        if isinstance(settings, dict) and "robustness" not in settings:
+            return {**settings, "robustness": EXPLORATION_ROBUSTNESS}
+        if isinstance(settings, SimSettings) and "robustness" not in settings.model_fields_set:
+            return settings.model_copy(update={"robustness": EXPLORATION_ROBUSTNESS})
+        return settings
 
     @field_validator("settings")
     @classmethod

@@ -61,6 +61,7 @@ def _at(computed, theta_deg: float, phi_deg: float):
     raise AssertionError(f"no pose at θ={theta_deg}, φ={phi_deg}")
 
 
+@pytest.mark.slow
 def test_sphere_is_one_manifold_with_near_constant_mu(sessions, named_object, pool) -> None:
     _, c = _explore(sessions, named_object("sphere"), "sphere", pool, dtheta=45, levels=1)
     viable = [p for p, s in c.samples.items() if s.viable]
@@ -72,6 +73,7 @@ def test_sphere_is_one_manifold_with_near_constant_mu(sessions, named_object, po
     assert biggest.local_maxima and biggest.best.mu_s >= biggest.mu_s_mean
 
 
+@pytest.mark.slow
 def test_sphere_map_is_the_same_for_one_or_two_workers(sessions, named_object, pool) -> None:
     runs = [_explore(sessions, named_object("sphere"), "sphere", pool, dtheta=45, levels=1,
                      workers=w, seed=w) for w in (1, 2)]
@@ -80,6 +82,7 @@ def test_sphere_map_is_the_same_for_one_or_two_workers(sessions, named_object, p
     assert a.map.model_dump() == b.map.model_dump()
 
 
+@pytest.mark.slow
 def test_cube_shows_face_edge_and_corner_approaches(sessions, named_object, pool) -> None:
     _, c = _explore(sessions, named_object("cube"), "cube", pool, dtheta=45, levels=0)
     faces = [_at(c, t, f) for t, f in ((0, 0), (90, 0), (90, 90), (90, 180), (90, 270), (180, 0))]
@@ -102,6 +105,7 @@ def test_cube_shows_face_edge_and_corner_approaches(sessions, named_object, pool
     assert all("palm" in described[lab].digits for lab in face_labels)
 
 
+@pytest.mark.slow
 def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
     client, sessions, pool
 ) -> None:
@@ -142,7 +146,8 @@ def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
     assert one.status_code == 200 and one.json()["label"] == handle
     assert client.get(f"/explorations/{eid}/manifolds/ZZ").status_code == 404
 
-    best = client.get(f"/explorations/{eid}/best", params={"limit": 3}).json()["poses"]
+    best = client.get(f"/explorations/{eid}/best",
+                      params={"limit": 3, "rank": "mu_s"}).json()["poses"]
     assert len(best) == 3 and best[0]["mu_s"] == max(m["mu_s_max"] for m in table)
     # From above only (approach direction within 60° of −z), and a low effort cap.
     cone = client.get(f"/explorations/{eid}/best", params={
@@ -152,7 +157,8 @@ def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
     capped = client.get(f"/explorations/{eid}/best",
                         params={"max_effort_nm": cap, "limit": 100}).json()["poses"]
     assert capped and all(p["effort_max_nm"] <= cap for p in capped)
-    per = client.get(f"/explorations/{eid}/best", params={"manifold": "B"}).json()["poses"]
+    per = client.get(f"/explorations/{eid}/best",
+                     params={"manifold": "B", "rank": "mu_s"}).json()["poses"]
     assert per and per[0]["pose_key"] == table[1]["best"]["key"]
     assert client.get(f"/explorations/{eid}/best", params={"cone_x": 1}).status_code == 422
 
@@ -175,6 +181,7 @@ def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
     assert [r["label"] for r in exported["table"]] == [m["name"] for m in table]
 
 
+@pytest.mark.slow
 def test_symmetry_detected_from_the_mesh() -> None:
     from graspscape.services.coordinator.exploration.symmetry import detect, hand_mirror
     from graspscape.shared.specs.gripper import load_gripper
@@ -213,6 +220,7 @@ def test_the_lattice_multiple_is_decided_at_submission_from_the_objects_symmetry
         assert row.spec["grid"]["azimuth_multiple"] == stored
 
 
+@pytest.mark.slow
 def test_symmetry_shortcut_mirrors_the_cube(sessions, named_object, pool) -> None:
     spec = ExplorationSpec(
         object_id=named_object("cube"),
@@ -252,6 +260,7 @@ def test_symmetry_shortcut_mirrors_the_cube(sessions, named_object, pool) -> Non
     assert "palm" in top.digits
 
 
+@pytest.mark.slow
 def test_configuration_shortcut_reuses_matching_grasps_alike_for_any_worker_count(
         sessions, named_object, pool) -> None:
     # Sphere approaches along one normal from 0 to 2 cm end in the same grasp: the farther
