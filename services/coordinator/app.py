@@ -15,9 +15,11 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.api import explorations, health, manifolds, objects, workers
+from graspscape.services.coordinator.api.finite import validation_error_handler
 from graspscape.services.coordinator.errors import CoordinatorError, InvalidInput
 from graspscape.services.coordinator.metrics import Metrics
 from graspscape.services.coordinator.settings import Settings, get_settings
@@ -93,6 +95,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         else:
             detail = exc.message
         return JSONResponse({"detail": detail}, status_code=exc.status_code)
+
+    # FastAPI's 422, except that it can always write what it echoes (NaN in a body was a 500).
+    app.add_exception_handler(RequestValidationError, validation_error_handler)
 
     for router in (objects.router, explorations.router, workers.router, health.router):
         app.include_router(router)

@@ -23,6 +23,12 @@ from pydantic import BaseModel, ConfigDict, Field
 
 WIRE_VERSION = 1
 
+# Ids, epochs and counts are the store's 32-bit integers: anything beyond is refused as
+# malformed when the message is decoded, instead of failing in the database driver.
+INT32_MAX = 2**31 - 1
+Id = Annotated[int, Field(ge=1, le=INT32_MAX)]
+Count = Annotated[int, Field(ge=0, le=INT32_MAX)]
+
 
 class _Message(BaseModel):
     # Unknown fields are ignored, not refused: a newer peer may add optional fields.
@@ -40,7 +46,7 @@ class LeaseRequest(_Message):
     capacity: int = Field(ge=1, le=64, description="tiles it can take now")
     # Tiles the worker still works on. Any other tile leased to this worker id was lost on
     # the way (a lease reply that never arrived) and goes back to the queue at once.
-    holding: list[int] = Field(default_factory=list, max_length=64)
+    holding: list[Id] = Field(default_factory=list, max_length=64)
 
 
 class ObjectRef(BaseModel):
@@ -48,7 +54,7 @@ class ObjectRef(BaseModel):
 
     model_config = ConfigDict(frozen=True)
 
-    object_id: int
+    object_id: Id
     name: str | None = None
     content_hash: str | None = Field(default=None, pattern=r"^[0-9a-f]{64}$")
     mesh_format: str | None = Field(default=None, pattern=r"^[a-z0-9]{1,8}$")
@@ -67,11 +73,11 @@ class TileLease(_Message):
     """One leased tile with everything needed to evaluate it (one reply per tile)."""
 
     kind: Literal["tile_lease"] = "tile_lease"
-    tile_id: int
-    exploration_id: int
-    level: int
-    index: int
-    lease_epoch: int
+    tile_id: Id
+    exploration_id: Id
+    level: Count
+    index: Count
+    lease_epoch: Count
     lease_expires_at: datetime
     cells: list[tuple[float, float]]
     r_levels: list[float]
@@ -97,8 +103,8 @@ class ResultBatch(_Message):
 
     kind: Literal["result_batch"] = "result_batch"
     worker_id: str = Field(pattern=WORKER_ID_PATTERN)
-    tile_id: int
-    lease_epoch: int
+    tile_id: Id
+    lease_epoch: Count
     results: list[PoseResult]
     final: bool = True
     release: bool = False
@@ -109,10 +115,10 @@ class Ack(_Message):
     """The coordinator committed a batch (or found it already committed)."""
 
     kind: Literal["ack"] = "ack"
-    tile_id: int
-    lease_epoch: int
-    inserted: int
-    duplicates: int
+    tile_id: Id
+    lease_epoch: Count
+    inserted: Count
+    duplicates: Count
     tile_state: str
 
 

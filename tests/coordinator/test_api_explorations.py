@@ -294,3 +294,71 @@ def test_service_refusals_use_the_validation_error_shape(client: TestClient) -> 
     (error,) = response.json()["detail"]
     assert error["loc"] == ["body", "object_id"] and error["type"] == "value_error"
     assert error["msg"] == "object_id 77 does not exist; upload it to /objects"
+
+
+@pytest.mark.parametrize(
+    ("body", "loc"),
+    [
+        (b'{"object_id": OBJ, "grid": {"dtheta": NaN}}', ["body", "grid", "dtheta"]),
+        (b'{"object_id": OBJ, "grid": {"r_max": Infinity}}', ["body", "grid", "r_max"]),
+        (b'{"object_id": OBJ, "grid": {"dr": -Infinity}}', ["body", "grid", "dr"]),
+        (b'{"object_id": OBJ, "grid": {"r_min": 1e999}}', ["body", "grid", "r_min"]),
+        (b'{"object_id": NaN}', ["body", "object_id"]),
+        (b'{"object_id": OBJ, "grid": {"attitudes": {"tilts": [0.1, NaN]}}}',
+         ["body", "grid", "attitudes", "tilts", 1]),
+        (b'{"object_id": OBJ, "settings": {"trajectory": {"duration_s": NaN}}}',
+         ["body", "settings", "trajectory", "duration_s"]),
+    ],
+)
+def test_non_finite_numbers_in_a_body_are_422(
+    client: TestClient, object_id: int, body: bytes, loc: list[Any]
+) -> None:
+    # Python's JSON parser takes NaN and Infinity; the 422 handler could not write them back
+    # (a 500), and a number without bounds would have been stored.
+    response = client.post("/explorations", content=body.replace(b"OBJ", str(object_id).encode()),
+                           headers={"content-type": "application/json"})
+    assert response.status_code == 422, response.text
+    (error,) = response.json()["detail"]
+    assert error["loc"] == loc and error["msg"] == "Input should be a finite number"
+    assert client.get("/explorations").json()["total"] == 0
+
+
+@pytest.mark.parametrize(("field", "value"), [("mass_kg", "nan"), ("friction", "inf"),
+                                              ("scale", "-inf"), ("mass_kg", "1e999")])
+def test_non_finite_form_numbers_are_422(client: TestClient, field: str, value: str) -> None:
+    response = client.post("/objects", data={"name": "sphere", field: value})
+    assert response.status_code == 422, response.text
+    (error,) = response.json()["detail"]
+    assert error["loc"] == ["body", field] and "finite" in error["msg"]
+
+
+@pytest.mark.parametrize(
+    ("path", "params"),
+    [
+        ("/explorations/{eid}/poses", {"r_min": "nan"}),
+        ("/explorations/{eid}/best", {"max_effort_nm": "inf"}),
+        ("/explorations/{eid}/best", {"cone_x": 0, "cone_y": 0, "cone_z": 1,
+                                      "cone_half_angle_deg": "nan"}),
+        ("/explorations/{eid}/map.svg", {"phi0_deg": "-inf"}),
+    ],
+)
+def test_non_finite_query_numbers_are_422(
+    client: TestClient, object_id: int, path: str, params: dict[str, Any]
+) -> None:
+    eid = submit(client, object_id)["id"]
+    response = client.get(path.format(eid=eid), params=params)
+    assert response.status_code == 422, response.text
+    assert "finite" in str(response.json()["detail"])
+
+
+def test_the_422_handler_writes_non_finite_inputs() -> None:
+    import asyncio
+
+    from fastapi.exceptions import RequestValidationError
+    from graspscape.services.coordinator.api.finite import validation_error_handler
+
+    exc = RequestValidationError([{"type": "greater_than_equal", "loc": ("body", "x"),
+                                   "msg": "bad", "input": [math.nan, math.inf, -math.inf]}])
+    response = asyncio.run(validation_error_handler(None, exc))  # type: ignore[arg-type]
+    assert response.status_code == 422
+    assert b'"input":["NaN","Infinity","-Infinity"]' in response.body

@@ -274,3 +274,38 @@ def test_lease_context_follows_a_reused_exploration_id(
     submit(any_sessions, tile_poses=3, object_name="cube")  # SQLite may reuse the id
     (tile,) = lease(client, "w-1")
     assert tile.object.name == "cube"
+
+
+@pytest.mark.parametrize(
+    ("key", "message", "reason"),
+    [
+        ("gs/results/1/1", {"kind": "result_batch", "worker_id": "w", "tile_id": 2**70,
+                            "lease_epoch": 1, "results": []},
+         "result_batch.tile_id: Input should be less than or equal to 2147483647"),
+        ("gs/results/1/1", {"kind": "result_batch", "worker_id": "w", "tile_id": 1,
+                            "lease_epoch": -(2**64), "results": []},
+         "result_batch.lease_epoch: Input should be greater than or equal to 0"),
+        (keys.LEASE_QUERY, {"kind": "lease_request", "worker_id": "w", "capacity": 1,
+                            "holding": [2**70]},
+         "lease_request.holding.0: Input should be less than or equal to 2147483647"),
+    ],
+)
+def test_out_of_range_integers_are_malformed_not_a_store_failure(
+    client: zenoh.Session, any_sessions: sessionmaker[Session], registry: CollectorRegistry,
+    key: str, message: dict[str, object], reason: str,
+) -> None:
+    # A tile id of 2^70 used to reach the database driver (OverflowError on SQLite, out of
+    # range on PostgreSQL): a traceback and an `unavailable` reply the worker retried forever.
+    submit(any_sessions, tile_poses=3)
+    (reply,) = ask(client, key, json.dumps({"v": 1, **message}).encode())
+    assert reply[0] == "error"
+    error = reply[1]
+    assert isinstance(error, ErrorReply) and error.code == ErrorCode.MALFORMED, error
+    assert error.message == reason
+    kind = key.split("/")[1]
+    assert counter(registry, "graspscape_dispatch_errors_total", where=kind,
+                   code="unavailable") == 0
+    with any_sessions() as session:
+        assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
+        assert set(session.scalars(select(TileRow.state))) == {"queued"}
+

@@ -6,6 +6,7 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, Response, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
+from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import UNAUTHORIZED, error
 from graspscape.services.coordinator.exploration import service
 from graspscape.services.coordinator.exploration.schemas import (
@@ -19,7 +20,7 @@ from graspscape.services.coordinator.exploration.schemas import (
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
 
-router = APIRouter(tags=["explorations"])
+router = APIRouter(tags=["explorations"], route_class=FiniteJSONRoute)
 
 Id = Annotated[int, Path(ge=1, le=2**31 - 1, description="exploration id")]
 _NOT_FOUND: dict[int | str, dict[str, Any]] = {404: error("no such exploration")}

@@ -7,10 +7,11 @@ from typing import Any
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 from graspscape.services.coordinator import db
+from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.metrics import CONTENT_TYPE
 from pydantic import BaseModel
 
-router = APIRouter(tags=["operations"])
+router = APIRouter(tags=["operations"], route_class=FiniteJSONRoute)
 
 
 class Health(BaseModel):

@@ -11,6 +11,7 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, Response
 from graspscape.services.coordinator.api.deps import SessionDep
+from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import error
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.schemas import PoseOut
@@ -19,7 +20,7 @@ from graspscape.services.coordinator.manifolds import service as manifolds
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary, table_rows_of
 from pydantic import BaseModel, Field
 
-router = APIRouter(tags=["manifolds"])
+router = APIRouter(tags=["manifolds"], route_class=FiniteJSONRoute)
 
 Id = Annotated[int, Path(ge=1, le=2**31 - 1, description="exploration id")]
 _LABEL = r"^([A-Z]{1,3}|[0-9]{1,4})$"
@@ -85,7 +86,8 @@ def best(
                                           description="approach-cone axis (object frame)")] = None,
     cone_y: Annotated[float | None, Query(allow_inf_nan=False, ge=-1e6, le=1e6)] = None,
     cone_z: Annotated[float | None, Query(allow_inf_nan=False, ge=-1e6, le=1e6)] = None,
-    cone_half_angle_deg: Annotated[float | None, Query(ge=0.0, le=180.0)] = None,
+    cone_half_angle_deg: Annotated[float | None, Query(ge=0.0, le=180.0,
+                                                       allow_inf_nan=False)] = None,
     max_effort_nm: Annotated[float | None, Query(ge=0.0, le=1e6, allow_inf_nan=False)] = None,
     limit: Annotated[int, Query(ge=1, le=100)] = 1,
     rank: Annotated[manifolds.Rank, Query(
@@ -141,7 +143,8 @@ _PICTURE_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"content": {"image/png": {}, "image/svg+xml": {}}, "description": "the map"},
 }
 Cut = Annotated[Literal["horizontal", "vertical"], Query(description="plane of the cut")]
-Phi0 = Annotated[float, Query(ge=-360.0, le=360.0, description="azimuth of a vertical cut, °")]
+Phi0 = Annotated[float, Query(ge=-360.0, le=360.0, allow_inf_nan=False,
+                              description="azimuth of a vertical cut, °")]
 AttitudeQ = Annotated[int, Query(ge=0, le=1000, description="attitude index of the cut")]
 
 

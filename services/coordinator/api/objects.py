@@ -8,12 +8,13 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
+from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import NOT_FOUND, UNAUTHORIZED, error
 from graspscape.services.coordinator.errors import InvalidInput, PayloadTooLarge
 from graspscape.services.coordinator.objects import service
 from graspscape.services.coordinator.objects.schemas import ObjectOut, ObjectPage
 
-router = APIRouter(tags=["objects"])
+router = APIRouter(tags=["objects"], route_class=FiniteJSONRoute)
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 _ERRORS: dict[int | str, dict[str, Any]] = {
@@ -68,9 +69,13 @@ def create_object(
         str | None,
         Form(max_length=300, description="built-in, 'pb:…', 'ycb:…' or 'shared:<file>'"),
     ] = None,
-    mass_kg: Annotated[float | None, Form(description="kg, (0, 50]")] = None,
-    friction: Annotated[float | None, Form(description="lateral friction, [0, 5]")] = None,
-    scale: Annotated[float | None, Form(description="uniform mesh scale, (0, 100]")] = None,
+    mass_kg: Annotated[float | None, Form(allow_inf_nan=False, description="kg, (0, 50]")] = None,
+    friction: Annotated[
+        float | None, Form(allow_inf_nan=False, description="lateral friction, [0, 5]")
+    ] = None,
+    scale: Annotated[
+        float | None, Form(allow_inf_nan=False, description="uniform mesh scale, (0, 100]")
+    ] = None,
     inertia_diag: Annotated[
         str | None, Form(max_length=200, description="'Ixx,Iyy,Izz' in kg·m²")
     ] = None,

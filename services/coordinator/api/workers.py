@@ -7,10 +7,11 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Query
 from graspscape.services.coordinator.api.deps import SessionDep
+from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.store.workers import list_workers
 from pydantic import BaseModel, ConfigDict
 
-router = APIRouter(tags=["workers"])
+router = APIRouter(tags=["workers"], route_class=FiniteJSONRoute)
 
 
 class WorkerOut(BaseModel):
