@@ -60,6 +60,23 @@ def decode(data: bytes | bytearray | memoryview) -> Message | ErrorReply:
         return error(ErrorCode.MALFORMED, "; ".join(parts))
 
 
+def decode_reply_error(data: bytes | bytearray | memoryview) -> ErrorReply:
+    """What an error reply to a query means.
+
+    A peer of this protocol sends an ErrorReply as JSON. An error reply whose payload is not
+    JSON at all was made by zenoh itself: above all its `Timeout`, when no final reply came
+    within the query's timeout (a coordinator busy with the database, or not there). That is
+    no refusal of the message: it comes back as `unavailable`, which the sender retries.
+    """
+    data = bytes(data)
+    try:
+        json.loads(data)
+    except (ValueError, UnicodeDecodeError):
+        text = data[:200].decode(errors="replace") or "an error without payload"
+        return error(ErrorCode.UNAVAILABLE, f"no reply in time (zenoh: {text}); retry")
+    return decode_as(data, ErrorReply)
+
+
 def decode_as(data: bytes | bytearray | memoryview, expected: type[M]) -> M | ErrorReply:
     """A message of the expected type; an error reply (kept as is) or a typed refusal else."""
     message = decode(data)

@@ -309,3 +309,75 @@ def test_out_of_range_integers_are_malformed_not_a_store_failure(
         assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
         assert set(session.scalars(select(TileRow.state))) == {"queued"}
 
+
+def test_a_timed_out_batch_is_sent_again_until_acknowledged_stored_and_evaluated_once(
+    dispatcher: Dispatcher, any_sessions: sessionmaker[Session], registry: CollectorRegistry,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The coordinator holds the batch past the worker's query timeout (another transaction
+    holds the database's write lock on SQLite, the exploration's row lock on PostgreSQL):
+    zenoh answers the worker with its `Timeout` error reply, which is no refusal. The worker
+    sends the batch again with backoff until the ack comes; the batch is stored once and the
+    tile evaluated once."""
+    import threading
+
+    from graspscape.services.coordinator.store.base import utcnow
+    from graspscape.workers.runtime.config import WorkerConfig
+    from graspscape.workers.runtime.process import WorkerProcess
+    from sqlalchemy import update
+
+    exploration_id = submit(any_sessions, tile_poses=3)
+    timeout_s = 0.4
+    config = WorkerConfig(connect=dispatcher.zs.listen, procs=1, name="slow", instant=True,
+                          query_timeout_s=timeout_s, backoff_min_s=0.05, backoff_max_s=0.2)
+    worker = WorkerProcess(config, 0)
+    worker.session = zenoh.open(zenoh_config(mode="client", connect=dispatcher.zs.listen))
+    evaluated: list[str] = []
+    evaluate = worker._evaluate
+
+    def counted(tile, obj, pose, donors=None):  # type: ignore[no-untyped-def]
+        evaluated.append(pose.key())
+        return evaluate(tile, obj, pose, donors)
+
+    worker._evaluate = counted  # type: ignore[method-assign]
+    acks: list[Ack | None] = []
+    lock = any_sessions()
+    try:
+        (tile,) = worker._lease()
+        lock.execute(update(ExplorationRow).where(ExplorationRow.id == exploration_id)
+                     .values(updated_at=utcnow()))  # held until the rollback below
+        caplog.set_level("WARNING", logger="graspscape.worker")
+
+        def work() -> None:
+            worker._work(tile)  # evaluates, sends, goes on
+            acks.append(worker._settle())  # reads the ack, sending again until it comes
+
+        thread = threading.Thread(target=work, daemon=True)
+        thread.start()
+        thread.join(5 * timeout_s)
+        # The old worker took zenoh's Timeout for a malformed refusal and gave up here.
+        assert thread.is_alive() and not acks, acks
+        lock.rollback()
+        thread.join(30)
+        assert not thread.is_alive()
+    finally:
+        lock.rollback()
+        lock.close()
+        worker.stop.set()
+        worker.stop_deadline = 0.0  # a worker still sending gives up at once
+        worker.session.close()
+    (ack,) = acks
+    assert isinstance(ack, Ack) and ack.tile_id == tile.tile_id and ack.tile_state == "done"
+    assert ack.inserted + ack.duplicates == 3
+    assert "Timeout" in caplog.text and "refused for good" not in caplog.text
+    assert counter(registry, "graspscape_dispatch_queries_total", kind="results",
+                   outcome="ok") >= 2  # it was sent again
+    assert sorted(evaluated) == sorted(p.key() for p in tile.poses())  # evaluated once
+    with any_sessions() as session:
+        keys_stored = session.scalars(select(PoseRow.pose_key)
+                                      .where(PoseRow.exploration_id == exploration_id)).all()
+        row = session.get(TileRow, tile.tile_id)
+        exploration = session.get(ExplorationRow, exploration_id)
+        assert sorted(keys_stored) == sorted(evaluated)  # stored once
+        assert (row.state, row.attempts, row.lease_epoch) == ("done", 1, tile.lease_epoch)
+        assert exploration.poses_done == 3

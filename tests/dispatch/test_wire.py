@@ -54,3 +54,15 @@ def test_worker_ids_are_safe_in_keys() -> None:
         except ValueError:
             continue
         raise AssertionError(bad)
+
+
+def test_zenoh_errors_of_a_query_are_retryable_and_refusals_stay_refusals() -> None:
+    from graspscape.shared.wire.codec import decode_reply_error
+
+    timeout = decode_reply_error(b"Timeout")  # what zenoh replies when no answer came in time
+    assert timeout.code == ErrorCode.UNAVAILABLE and timeout.code.retryable
+    assert "Timeout" in timeout.message
+    assert decode_reply_error(b"").code.retryable
+    refusal = ErrorReply(code=ErrorCode.INVALID, message="pose key mismatch")
+    assert decode_reply_error(encode(refusal)) == refusal
+    assert decode_reply_error(b'{"v": 1, "kind": "ack"}').code == ErrorCode.MALFORMED

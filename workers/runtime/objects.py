@@ -15,8 +15,8 @@ from pathlib import Path
 import zenoh
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.wire import keys
-from graspscape.shared.wire.codec import decode_as, encode
-from graspscape.shared.wire.messages import ErrorReply, ObjectData, ObjectRef, ObjectRequest
+from graspscape.shared.wire.codec import decode_as, decode_reply_error, encode
+from graspscape.shared.wire.messages import ObjectData, ObjectRef, ObjectRequest
 
 
 class ObjectFetchError(RuntimeError):
@@ -67,7 +67,7 @@ class ObjectCache:
             if reply.ok is not None:
                 message = decode_as(reply.ok.payload.to_bytes(), ObjectData)
             else:
-                message = decode_as(reply.err.payload.to_bytes(), ErrorReply)
+                message = decode_reply_error(reply.err.payload.to_bytes())
             if isinstance(message, ObjectData):
                 return message
             raise ObjectFetchError(f"mesh {content_hash}: {message.code}: {message.message}",

@@ -29,10 +29,9 @@ from graspscape.shared.specs.results import (
     PoseResult,
 )
 from graspscape.shared.wire import keys
-from graspscape.shared.wire.codec import decode_as, encode
+from graspscape.shared.wire.codec import decode_as, decode_reply_error, encode
 from graspscape.shared.wire.messages import (
     Ack,
-    ErrorReply,
     LeaseRequest,
     ResultBatch,
     TileLease,
@@ -148,12 +147,12 @@ class WorkerProcess:
                 if reply.ok is not None:
                     message = decode_as(reply.ok.payload.to_bytes(), TileLease)
                 else:
-                    message = decode_as(reply.err.payload.to_bytes(), ErrorReply)
+                    message = decode_reply_error(reply.err.payload.to_bytes())
                 if isinstance(message, TileLease):
                     tiles.append(message)
                 else:
-                    # A tile whose reply cannot be read stays leased to this id; the next
-                    # request (holding nothing) hands it back.
+                    # A tile whose reply cannot be read (or came too late) stays leased to
+                    # this id; the next request (holding nothing) hands it back.
                     log.warning("%s: lease refused: %s: %s", self.worker_id, message.code,
                                 message.message)
         except zenoh.ZError as exc:
@@ -227,11 +226,10 @@ class WorkerProcess:
         self._settle()
         self.pending = self._query(batch)
 
-    def _settle(self) -> None:
+    def _settle(self) -> Ack | None:
         """Wait for the batch in flight, if any, to be acknowledged (or given up)."""
         pending, self.pending = self.pending, None
-        if pending is not None:
-            self._await(pending)
+        return self._await(pending) if pending is not None else None
 
     def _query(self, batch: ResultBatch, payload: bytes | None = None) -> _Delivery:
         payload = payload if payload is not None else encode(batch)
@@ -258,15 +256,17 @@ class WorkerProcess:
                     if reply.ok is not None:
                         message = decode_as(reply.ok.payload.to_bytes(), Ack)
                     else:
-                        message = decode_as(reply.err.payload.to_bytes(), ErrorReply)
+                        # zenoh's own Timeout (no ack within query_timeout_s: the coordinator
+                        # may still be committing it) comes back as a retryable `unavailable`.
+                        message = decode_reply_error(reply.err.payload.to_bytes())
                     if isinstance(message, Ack):
                         return message
                     if not message.code.retryable:
                         log.error("%s: batch of tile %d refused for good: %s: %s",
                                   self.worker_id, batch.tile_id, message.code, message.message)
                         return None
-                    log.warning("%s: batch of tile %d not stored yet: %s", self.worker_id,
-                                batch.tile_id, message.message)
+                    log.warning("%s: batch of tile %d not acknowledged yet (%s); sending it "
+                                "again", self.worker_id, batch.tile_id, message.message)
             except zenoh.ZError as exc:
                 log.warning("%s: sending tile %d failed: %s", self.worker_id, batch.tile_id, exc)
             # No answer (coordinator down or restarting) or a retryable refusal.
