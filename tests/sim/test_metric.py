@@ -148,3 +148,25 @@ def test_rotation_vector_inverts_axis_rotations():
             expected = np.zeros(3)
             expected[axis] = angle
             assert rotation_vector(axis_rotation(axis, angle)) == pytest.approx(expected, abs=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["mug", "cube", "sphere"])
+def test_moving_the_object_keeps_outcomes_and_most_mu_s(name, make_evaluator):
+    # The estimator reads relative poses only; the simulation is not repeatable under
+    # round-off to below a millimetre, so a few compliant grasps' μs move as they do when the
+    # object moves 1 µm (docs/metrics.md: 88–90 % of 72 grasps of six objects stay within
+    # 0.01; the mug's fewest). Every outcome stays; at least half the grasps keep μs.
+    rng = np.random.default_rng(7)
+    poses = [Pose(theta=float(np.arccos(rng.uniform(-1, 1))), phi=float(rng.uniform(0, 6.28)),
+                  r=0.02, roll=float(rng.choice([0.0, 1.5708]))) for _ in range(12)]
+    evaluators = [make_evaluator(name, world_offset=offset)
+                  for offset in [(0.0, 0.0, 0.0), (0.5, -0.3, 0.2), (10.0, 10.0, 1.0)]]
+    changes = []
+    for pose in poses:
+        results = [evaluator.evaluate(pose) for evaluator in evaluators]
+        assert len({r.outcome for r in results}) == 1, pose
+        if results[0].viable:
+            changes.append(max(abs(r.mu_s - results[0].mu_s) for r in results))
+    assert len(changes) >= 3
+    assert np.median(changes) <= 0.01
