@@ -56,7 +56,7 @@ WELD_POSES = CALIBRATION_POSES
 
 # A weld reads S = 0 by construction of the estimator (relative poses, ±ε); what is left is
 # pybullet's: a weld is a velocity-level constraint that lags the hand's turn along the moving
-# reference path by a fraction of a millimetre (0.9965–0.9999 on a path that stands still,
+# reference path by a fraction of a millimetre (0.9965–0.9999 on a task that stands still,
 # docs/metrics.md, "The estimator"). The 3 cm ball, with the shortest lever, reads lowest.
 WELD_FLOOR = 0.97
 
