@@ -151,6 +151,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     explore = subparsers.add_parser(
         "explore",
         help="explore an object on this machine: coordinator (SQLite) + local workers",
+        epilog="The last line says how the exploration ended; exit status 0 done (every pose "
+        "stored), 2 incomplete (tiles failed, some poses stored), 1 failed (no pose stored) or "
+        "cancelled, 130 interrupted. The same command again resumes an unfinished exploration "
+        "and queues its failed tiles again.",
     )
     explore.add_argument(
         "object", help="built-in name (sphere, cube, mug, ...), pb:<name>, ycb:<Folder> or a "

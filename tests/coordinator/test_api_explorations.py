@@ -362,3 +362,104 @@ def test_the_422_handler_writes_non_finite_inputs() -> None:
     response = asyncio.run(validation_error_handler(None, exc))  # type: ignore[arg-type]
     assert response.status_code == 422
     assert b'"input":["NaN","Infinity","-Infinity"]' in response.body
+
+
+def _fail(sessions: sessionmaker[Session], n_tiles: int, error: str = "pybullet exploded",
+          worker: str = "w9") -> list[int]:
+    """Lease tiles and have each fail for good (max_attempts 1), as a worker's error report."""
+    from graspscape.services.coordinator.store.queue import fail_tile
+
+    failed = []
+    with sessions() as s:
+        for t in lease_tiles(s, worker_id=worker, n=n_tiles, lease_seconds=60):
+            assert fail_tile(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                             error=f"{worker}: {error}", max_attempts=1) == "failed"
+            failed.append(t.tile_id)
+    return failed
+
+
+def test_failed_tiles_leave_an_exploration_incomplete_with_reasons_until_retried(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    created = submit(client, object_id)
+    eid, n_tiles = created["id"], created["tiles_total"]
+    assert n_tiles >= 3
+    results = work(sessions, n_tiles - 2)
+    failed = _fail(sessions, 1, "RuntimeError: pybullet exploded")
+    failed += _fail(sessions, 1, "lease expired on attempt 3 of 3", worker="w8")
+
+    detail = client.get(f"/explorations/{eid}").json()
+    # Two tiles' poses were never stored: this used to read "done".
+    assert detail["status"] == "incomplete" and detail["finished_at"] is not None
+    assert detail["poses_done"] == len(results) < detail["poses_total"]
+    assert detail["progress"]["tiles"]["failed"] == 2 and detail["progress"]["eta_s"] == 0.0
+    assert detail["failures"] == {"tiles": 2, "reasons": [
+        {"reason": "w8: lease expired on attempt 3 of 3", "tiles": 1},
+        {"reason": "w9: RuntimeError: pybullet exploded", "tiles": 1},
+    ]}
+    listed = client.get("/explorations", params={"status": "incomplete"}).json()
+    assert [e["id"] for e in listed["items"]] == [eid]
+
+    page = client.get(f"/explorations/{eid}/failures", params={"limit": 1}).json()
+    assert page["total"] == 2 and page["limit"] == 1 and len(page["items"]) == 1
+    (first,) = page["items"]
+    assert first["tile_id"] == min(failed) and first["level"] == 0 and first["attempts"] == 1
+    assert first["last_error"] == "w9: RuntimeError: pybullet exploded"
+    second = client.get(f"/explorations/{eid}/failures", params={"offset": 1}).json()["items"]
+    assert [t["tile_id"] for t in second] == [max(failed)]
+    assert client.get("/explorations/999999/failures").status_code == 404
+
+    cancel = client.post(f"/explorations/{eid}/cancel")
+    assert cancel.status_code == 409 and "already incomplete" in cancel.json()["detail"]
+
+    retried = client.post(f"/explorations/{eid}/retry")
+    assert retried.status_code == 200, retried.text
+    assert retried.json() == {"id": eid, "status": "running", "tiles_requeued": 2}
+    detail = client.get(f"/explorations/{eid}").json()
+    assert detail["status"] == "running" and detail["finished_at"] is None
+    assert detail["failures"] == {"tiles": 0, "reasons": []}
+    assert detail["progress"]["tiles"]["queued"] == 2
+    assert client.get(f"/explorations/{eid}/failures").json()["total"] == 0
+    again = client.post(f"/explorations/{eid}/retry")
+    assert again.status_code == 409 and "no failed tiles" in again.json()["detail"]
+
+    with sessions() as s:  # attempts start from zero: the first failure requeues
+        (t,) = lease_tiles(s, worker_id="w7", n=1, lease_seconds=60)
+        from graspscape.services.coordinator.store.queue import fail_tile
+
+        assert fail_tile(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, error="once",
+                         max_attempts=2) == "queued"
+    work(sessions, 2)
+    detail = client.get(f"/explorations/{eid}").json()
+    assert detail["status"] == "done" and detail["poses_done"] == detail["poses_total"]
+    assert detail["failures"]["tiles"] == 0
+    assert client.post(f"/explorations/{eid}/retry").status_code == 409
+
+
+def test_an_exploration_whose_tiles_all_failed_without_a_pose_is_failed(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    created = submit(client, object_id, grid={**SMALL_GRID, "dtheta": 1.5})
+    eid = created["id"]
+    _fail(sessions, created["tiles_total"], "ObjectFetchError: mesh is not watertight")
+    detail = client.get(f"/explorations/{eid}").json()
+    assert detail["status"] == "failed" and detail["poses_done"] == 0
+    assert detail["failures"] == {"tiles": created["tiles_total"], "reasons": [
+        {"reason": "w9: ObjectFetchError: mesh is not watertight",
+         "tiles": created["tiles_total"]}]}
+    assert client.get("/explorations", params={"status": "failed"}).json()["total"] == 1
+    assert 'graspscape_explorations{status="failed"} 1.0' in client.get("/metrics").text
+    assert client.post(f"/explorations/{eid}/retry").json()["status"] == "running"
+
+
+def test_retry_refuses_cancelled_and_unknown_explorations(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    eid = submit(client, object_id)["id"]
+    _fail(sessions, 1)
+    assert client.post(f"/explorations/{eid}/cancel").status_code == 200
+    response = client.post(f"/explorations/{eid}/retry")
+    assert response.status_code == 409 and "cancelled" in response.json()["detail"]
+    assert client.get(f"/explorations/{eid}").json()["status"] == "cancelled"
+    assert client.post("/explorations/999999/retry").status_code == 404
+

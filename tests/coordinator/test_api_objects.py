@@ -138,4 +138,5 @@ def test_bearer_token_guards_mutating_routes(settings: Settings, tmp_path: Path)
             == 401
         )
         assert c.post("/explorations/1/cancel").status_code == 401
+        assert c.post("/explorations/1/retry").status_code == 401
         assert c.delete("/explorations/1").status_code == 401

@@ -128,7 +128,9 @@ def test_attempts_are_capped_and_the_tile_fails_with_its_error(session: Session)
     assert all("attempt 2 of 2" in (r.last_error or "") for r in rows)
     exploration = session.get(ExplorationRow, eid)
     session.refresh(exploration)
-    assert exploration is not None and exploration.status == "done"
+    # Every tile failed and no pose was stored: the exploration failed (it was "done").
+    assert exploration is not None and exploration.status == "failed"
+    assert exploration.finished_at is not None
     assert lease_tiles(session, worker_id="w", n=1, lease_seconds=60) == []
 
 

@@ -1,4 +1,5 @@
-"""Routes for explorations: submit, list, one with progress, cancel, delete, its poses."""
+"""Routes for explorations: submit, list, one with progress, cancel, delete, its poses, its
+failed tiles and their retry."""
 
 from __future__ import annotations
 
@@ -14,6 +15,9 @@ from graspscape.services.coordinator.exploration.schemas import (
     ExplorationDetail,
     ExplorationOut,
     ExplorationPage,
+    ExplorationRetried,
+    FailedTileOut,
+    FailurePage,
     PoseFilter,
     PoseOut,
     PosePage,
@@ -58,7 +62,8 @@ def submit(spec: ExplorationSpec, session: SessionDep, settings: SettingsDep) ->
 def list_explorations(
     session: SessionDep,
     status_: Annotated[
-        Literal["queued", "running", "done", "cancelled"] | None, Query(alias="status")
+        Literal["queued", "running", "done", "incomplete", "failed", "cancelled"] | None,
+        Query(alias="status"),
     ] = None,
     object_id: Annotated[int | None, Query(ge=1, le=2**31 - 1)] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
@@ -79,14 +84,53 @@ def list_explorations(
     "/explorations/{exploration_id}",
     response_model=ExplorationDetail,
     responses=_NOT_FOUND,
-    summary="One exploration with its progress",
+    summary="One exploration with its progress and a summary of its failed tiles",
 )
 def get_exploration(exploration_id: Id, session: SessionDep, settings: SettingsDep) -> Any:
     row = service.get_exploration(session, exploration_id=exploration_id)
     progress = service.progress(session, row=row, window_s=settings.throughput_window_s)
+    failures = service.failure_summary(session, exploration_id=exploration_id)
     return ExplorationDetail.model_validate(
-        {**ExplorationOut.model_validate(row).model_dump(), "progress": progress}
+        {**ExplorationOut.model_validate(row).model_dump(), "progress": progress,
+         "failures": failures}
     )
+
+
+@router.get(
+    "/explorations/{exploration_id}/failures",
+    response_model=FailurePage,
+    responses=_NOT_FOUND,
+    summary="Its failed tiles (after max_attempts), with attempts and the last error",
+)
+def list_failures(
+    exploration_id: Id,
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0, le=2**31 - 1)] = 0,
+) -> Any:
+    rows, total = service.list_failures(
+        session, exploration_id=exploration_id, limit=limit, offset=offset
+    )
+    return FailurePage(
+        items=[FailedTileOut.model_validate(r) for r in rows], total=total, limit=limit,
+        offset=offset,
+    )
+
+
+@router.post(
+    "/explorations/{exploration_id}/retry",
+    response_model=ExplorationRetried,
+    dependencies=Mutating,
+    responses={
+        **_NOT_FOUND,
+        **UNAUTHORIZED,
+        409: error("the exploration is cancelled, or has no failed tiles"),
+    },
+    summary="Queue its failed tiles again (attempts from zero) and set it running",
+)
+def retry(exploration_id: Id, session: SessionDep) -> Any:
+    row, requeued = service.retry_exploration(session, exploration_id=exploration_id)
+    return ExplorationRetried(id=row.id, status=row.status, tiles_requeued=requeued)
 
 
 @router.post(
@@ -96,7 +140,7 @@ def get_exploration(exploration_id: Id, session: SessionDep, settings: SettingsD
     responses={
         **_NOT_FOUND,
         **UNAUTHORIZED,
-        409: error("the exploration is already done"),
+        409: error("the exploration is already finished (done, incomplete or failed)"),
     },
     summary="Cancel: no more tiles are handed out; stored results stay",
 )

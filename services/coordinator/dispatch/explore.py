@@ -2,8 +2,10 @@
 
 Runs the coordinator's store (SQLite under the data folder) and dispatch in this process and
 N local worker processes that connect to it over loopback zenoh, exactly as remote workers
-would; shows a progress bar and prints where the results are. Running the same command again
-resumes an unfinished exploration of the same spec instead of starting over.
+would; shows a progress bar and prints where the results are, and last the outcome (done,
+incomplete or failed, with the reasons of failed tiles), which the exit status follows.
+Running the same command again resumes an unfinished exploration of the same spec instead of
+starting over; one that ended incomplete or failed has its failed tiles queued again.
 """
 
 from __future__ import annotations
@@ -24,11 +26,16 @@ from graspscape.services.coordinator.dispatch.explore_defaults import (
 )
 from graspscape.services.coordinator.dispatch.leases import requeue_lost
 from graspscape.services.coordinator.dispatch.service import Dispatcher
-from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.exploration.adaptive import resolve_grid
+from graspscape.services.coordinator.exploration.service import (
+    create_exploration,
+    failure_summary,
+)
 from graspscape.services.coordinator.maps.picture import write_map_files
 from graspscape.services.coordinator.objects.service import create_named, create_uploaded
 from graspscape.services.coordinator.settings import Settings, ZenohSettings
 from graspscape.services.coordinator.store.models import (
+    FINISHED_STATUSES,
     POSE_METRIC_COLUMNS,
     ExplorationRow,
     ExplorationStatus,
@@ -36,6 +43,7 @@ from graspscape.services.coordinator.store.models import (
     TileRow,
     TileState,
 )
+from graspscape.services.coordinator.store.queue import retry_failed_tiles
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
 from graspscape.shared.specs.robustness import TestName
 from graspscape.workers.runtime.config import WorkerConfig, default_procs
@@ -81,27 +89,72 @@ def _object_id(session: Session, opts: ExploreOptions) -> int:
     return row.id
 
 
-def _exploration(session: Session, spec: ExplorationSpec, settings: Settings) -> tuple[int, bool]:
-    """The unfinished exploration of this very spec (resumed), or a new one."""
-    wanted = spec.model_dump(mode="json")
+# Exit statuses of `graspscape explore`.
+EXIT_DONE, EXIT_FAILED, EXIT_INCOMPLETE, EXIT_INTERRUPTED = 0, 1, 2, 130
+_UNFINISHED = (ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)
+_RETRYABLE = (ExplorationStatus.INCOMPLETE, ExplorationStatus.FAILED)
+
+
+def _exploration(session: Session, spec: ExplorationSpec,
+                 settings: Settings) -> tuple[int, bool, int]:
+    """The unfinished exploration of this very spec (resumed; one that ended incomplete or
+    failed has its failed tiles queued again), or a new one. (id, resumed, tiles retried)"""
+    # As stored: with the grid's azimuth multiple decided at submission (else no stored spec
+    # ever equals the one asked for, and nothing was resumed).
+    wanted = resolve_grid(session, spec).model_dump(mode="json")
     for row in session.scalars(
-        select(ExplorationRow).where(
-            ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING))
-        )
+        select(ExplorationRow)
+        .where(ExplorationRow.status.in_(_UNFINISHED + _RETRYABLE))
+        .order_by(ExplorationRow.status.in_(_RETRYABLE), ExplorationRow.id.desc())
     ):
         if row.spec == wanted:
-            return row.id, True
+            retried = 0
+            if row.status in _RETRYABLE:
+                retried = retry_failed_tiles(session, exploration_id=row.id)
+            return row.id, True, retried
     row = create_exploration(session, spec=spec, tile_target_poses=settings.tile_target_poses,
                              max_poses=settings.max_poses_per_exploration)
-    return row.id, False
+    return row.id, False, 0
 
 
-def _bar(done: int, total: int, viable: int, rate: float, width: int = 30) -> str:
+def outcome_line(session: Session, exploration_id: int, stored: int, elapsed_s: float) -> str:
+    """The command's last line: status, poses stored of those planned, failed tiles and why."""
+    row = session.get(ExplorationRow, exploration_id)
+    assert row is not None
+    session.refresh(row)
+    line = f"{row.status}: {stored} of {row.poses_total} poses stored in {elapsed_s:.0f} s"
+    failures = failure_summary(session, exploration_id=exploration_id)
+    if failures.tiles:
+        reasons = "; ".join(
+            f"{_short(r.reason or 'no reason recorded')} ({r.tiles} tiles)"
+            for r in failures.reasons[:3])
+        more = len(failures.reasons) - 3
+        line += (f"; {failures.tiles} tiles failed: {reasons}"
+                 f"{f'; and {more} other reasons' if more > 0 else ''}")
+        if row.status != ExplorationStatus.CANCELLED:
+            line += "; run the same command again to retry them"
+    return line
+
+
+def _short(text: str, limit: int = 200) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def exit_status(status: str) -> int:
+    return {ExplorationStatus.DONE: EXIT_DONE,
+            ExplorationStatus.INCOMPLETE: EXIT_INCOMPLETE}.get(status, EXIT_FAILED)
+
+
+def _bar(done: int, total: int, viable: int, rate: float, failed: int = 0,
+         width: int = 30) -> str:
     frac = done / total if total else 1.0
     filled = int(frac * width)
     eta = f"{(total - done) / rate:5.0f} s" if rate > 0 else "    ? s"
+    failed_text = f"  {failed} tiles failed" if failed else ""
     return (f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} poses "
-            f"{100 * frac:5.1f} %  viable {viable}  {rate:5.1f} poses/s  ETA {eta}")
+            f"{100 * frac:5.1f} %  viable {viable}  {rate:5.1f} poses/s  ETA {eta}"
+            f"{failed_text}")
 
 
 def _export_csv(session: Session, exploration_id: int, path: Path) -> int:
@@ -146,7 +199,7 @@ def run_explore(opts: ExploreOptions) -> int:
             "robustness": sim.robustness.model_copy(update={"tests": opts.robustness})})})
     with sessions() as session:
         spec = spec.model_copy(update={"object_id": _object_id(session, opts)})
-        exploration_id, resumed = _exploration(session, spec, settings)
+        exploration_id, resumed, retried = _exploration(session, spec, settings)
         # Every worker of this command starts now, so any lease still held is an orphan of
         # an earlier, interrupted run.
         requeue_lost(session, alive=[], max_attempts=settings.max_attempts)
@@ -154,7 +207,8 @@ def run_explore(opts: ExploreOptions) -> int:
             select(ExplorationRow.poses_total).where(ExplorationRow.id == exploration_id))
     say = (lambda *a: None) if opts.quiet else (lambda msg: print(msg, file=sys.stderr))
     say(f"{'resuming' if resumed else 'exploration'} {exploration_id}: {total} poses of "
-        f"{opts.object} with {opts.gripper}, {opts.procs} worker processes")
+        f"{opts.object} with {opts.gripper}, {opts.procs} worker processes"
+        + (f"; {retried} failed tiles queued again" if retried else ""))
 
     dispatcher = Dispatcher(settings, sessions)
     dispatcher.start()
@@ -177,14 +231,19 @@ def run_explore(opts: ExploreOptions) -> int:
                 assert row is not None
                 status, done, total, viable = (row.status, row.poses_done, row.poses_total,
                                                row.viable_count)
+                failed_now = session.scalar(
+                    select(func.count()).select_from(TileRow).where(
+                        TileRow.exploration_id == exploration_id,
+                        TileRow.state == TileState.FAILED)) or 0
             now = time.monotonic()
             if first_done is None and done > 0:
                 first_done = (now, done)  # rate from the first result: start-up excluded
             rate = ((done - first_done[1]) / (now - first_done[0])
                     if first_done and now > first_done[0] else 0.0)
             if not opts.quiet:
-                print(_bar(done, total, viable, rate), end="", file=sys.stderr, flush=True)
-            if status in (ExplorationStatus.DONE, ExplorationStatus.CANCELLED):
+                print(_bar(done, total, viable, rate, failed_now), end="", file=sys.stderr,
+                      flush=True)
+            if status in FINISHED_STATUSES:
                 break
             time.sleep(0.5)
     except KeyboardInterrupt:
@@ -201,9 +260,6 @@ def run_explore(opts: ExploreOptions) -> int:
             signal.signal(signal.SIGINT, previous)
     elapsed = time.monotonic() - started
     with sessions() as session:
-        failed = session.scalar(
-            select(func.count()).select_from(TileRow).where(
-                TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED))
         csv_path = data_dir / f"exploration-{exploration_id}.csv"
         n = _export_csv(session, exploration_id, csv_path)
         map_path = data_dir / f"exploration-{exploration_id}-map.png"
@@ -211,17 +267,20 @@ def run_explore(opts: ExploreOptions) -> int:
         manifolds = None
         if n and not interrupted:
             manifolds, _ = write_map_files(session, exploration_id, map_path, table_path)
+        outcome = (f"interrupted: {n} poses stored in {elapsed:.0f} s; run the same command "
+                   "again to resume" if interrupted
+                   else outcome_line(session, exploration_id, n, elapsed))
+        status = session.scalar(
+            select(ExplorationRow.status).where(ExplorationRow.id == exploration_id)) or status
     engine.dispose()
     say("")
-    if interrupted:
-        say(f"stopped after {elapsed:.0f} s with {n} poses stored; run the same command again "
-            "to resume")
-    else:
-        say(f"{status}: {n} poses in {elapsed:.0f} s, {failed} tiles failed")
     print(f"results: {csv_path}")
     if manifolds is not None:
         print(f"map: {map_path} ({manifolds} behavioral manifolds; table: {table_path})")
     print(f"database: {data_dir / 'coordinator.db'} (exploration {exploration_id}); browse with "
           f"`graspscape serve --data-dir {data_dir}` and GET "
           f"/explorations/{exploration_id}/poses")
-    return 130 if interrupted else (0 if status == ExplorationStatus.DONE and not failed else 1)
+    # Last, on stdout even with --quiet: what became of the exploration; the exit status says
+    # the same (0 done, 2 incomplete, 1 failed or cancelled, 130 interrupted).
+    print(outcome)
+    return EXIT_INTERRUPTED if interrupted else exit_status(status)

@@ -15,7 +15,9 @@ class ExplorationOut(BaseModel):
     id: int
     object_id: int
     spec: ExplorationSpec
-    status: str = Field(description="queued, running, done or cancelled")
+    status: str = Field(
+        description="queued, running, done (every planned pose stored), incomplete (tiles "
+        "failed, some poses stored), failed (tiles failed, no pose stored) or cancelled")
     tiles_total: int
     poses_total: int = Field(description="poses of the coarse pass")
     poses_done: int
@@ -36,8 +38,46 @@ class Progress(BaseModel):
     eta_s: float | None = Field(description="remaining / throughput; null when stalled")
 
 
+class FailureReason(BaseModel):
+    reason: str | None = Field(description="the tiles' last_error")
+    tiles: int = Field(description="failed tiles with this reason")
+
+
+class FailureSummary(BaseModel):
+    tiles: int = Field(description="tiles failed (after max_attempts)")
+    reasons: list[FailureReason] = Field(
+        description="their distinct reasons, most frequent first (at most 20; the whole list "
+        "is at /explorations/{id}/failures)")
+
+
 class ExplorationDetail(ExplorationOut):
     progress: Progress
+    failures: FailureSummary
+
+
+class FailedTileOut(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+    tile_id: int = Field(validation_alias="id")
+    level: int = Field(description="0 = coarse pass")
+    index: int
+    n_poses: int
+    attempts: int
+    last_error: str | None
+    updated_at: datetime
+
+
+class FailurePage(BaseModel):
+    items: list[FailedTileOut]
+    total: int
+    limit: int
+    offset: int
+
+
+class ExplorationRetried(BaseModel):
+    id: int
+    status: str
+    tiles_requeued: int
 
 
 class ExplorationPage(BaseModel):

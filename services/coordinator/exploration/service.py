@@ -6,10 +6,17 @@ from datetime import datetime, timedelta
 
 from graspscape.services.coordinator.errors import Conflict, InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.adaptive import plan_coarse, resolve_grid
-from graspscape.services.coordinator.exploration.schemas import PoseFilter, Progress
+from graspscape.services.coordinator.exploration.schemas import (
+    FailureReason,
+    FailureSummary,
+    PoseFilter,
+    Progress,
+)
 from graspscape.services.coordinator.exploration.tiling import count_poses
+from graspscape.services.coordinator.store import queue
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
+    FINISHED_STATUSES,
     ExplorationRow,
     ExplorationStatus,
     ManifoldRow,
@@ -123,7 +130,7 @@ def progress(
     )
     throughput = recent / window_s
     remaining = max(0, row.poses_total - row.poses_done)
-    if row.status in (ExplorationStatus.DONE, ExplorationStatus.CANCELLED) or remaining == 0:
+    if row.status in FINISHED_STATUSES or remaining == 0:
         eta: float | None = 0.0
     else:
         eta = remaining / throughput if throughput > 0 else None
@@ -143,8 +150,8 @@ def cancel_exploration(session: Session, *, exploration_id: int) -> ExplorationR
     row = get_exploration(session, exploration_id=exploration_id)
     if row.status == ExplorationStatus.CANCELLED:
         return row
-    if row.status == ExplorationStatus.DONE:
-        raise Conflict(f"exploration {exploration_id} is already done; nothing to cancel")
+    if row.status in FINISHED_STATUSES:
+        raise Conflict(f"exploration {exploration_id} is already {row.status}; nothing to cancel")
     now = utcnow()
     session.execute(
         update(TileRow)
@@ -160,6 +167,45 @@ def cancel_exploration(session: Session, *, exploration_id: int) -> ExplorationR
     row.updated_at = now
     session.commit()
     return row
+
+
+_MAX_REASONS = 20
+
+
+def failure_summary(session: Session, *, exploration_id: int) -> FailureSummary:
+    """How many tiles failed, and why: their distinct last errors, most frequent first."""
+    counts = session.execute(
+        select(TileRow.last_error, func.count())
+        .where(TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED)
+        .group_by(TileRow.last_error)
+        .order_by(func.count().desc(), TileRow.last_error)
+    ).all()
+    return FailureSummary(
+        tiles=sum(n for _, n in counts),
+        reasons=[FailureReason(reason=reason, tiles=n) for reason, n in counts[:_MAX_REASONS]],
+    )
+
+
+def list_failures(
+    session: Session, *, exploration_id: int, limit: int, offset: int
+) -> tuple[list[TileRow], int]:
+    """The failed tiles of an exploration, by tile id."""
+    get_exploration(session, exploration_id=exploration_id)
+    failed = (TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED)
+    total = session.scalar(select(func.count()).select_from(TileRow).where(*failed)) or 0
+    rows = session.scalars(
+        select(TileRow).where(*failed).order_by(TileRow.id).limit(limit).offset(offset)
+    ).all()
+    return list(rows), total
+
+
+def retry_exploration(session: Session, *, exploration_id: int) -> tuple[ExplorationRow, int]:
+    """Queue its failed tiles again (attempts from zero) and set it running."""
+    get_exploration(session, exploration_id=exploration_id)
+    requeued = queue.retry_failed_tiles(session, exploration_id=exploration_id)
+    row = get_exploration(session, exploration_id=exploration_id)
+    session.refresh(row)
+    return row, requeued
 
 
 def delete_exploration(session: Session, *, exploration_id: int) -> None:

@@ -33,8 +33,8 @@ from graspscape.services.coordinator.manifolds.summary import (
     build_map,
 )
 from graspscape.services.coordinator.store.models import (
+    FINISHED_STATUSES,
     ExplorationRow,
-    ExplorationStatus,
     ManifoldRow,
     ObjectRow,
     PoseRow,
@@ -196,7 +196,7 @@ def ensure_manifolds(session: Session, exploration_id: int) -> None:
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
     last = _last_refresh(session, exploration_id)
-    done = row.status in (ExplorationStatus.DONE, ExplorationStatus.CANCELLED)
+    done = row.status in FINISHED_STATUSES
     if last is not None:
         if last.get("poses_done") == row.poses_done and (last.get("final") or not done):
             return

@@ -30,8 +30,22 @@ from sqlalchemy.orm import Mapped, mapped_column
 class ExplorationStatus(StrEnum):
     QUEUED = "queued"  # no tile leased yet
     RUNNING = "running"
-    DONE = "done"  # every tile done or failed
+    DONE = "done"  # every tile done: every planned pose stored
+    # No tile open any more, but some failed (tiles.last_error says why): some poses stored
+    # (incomplete) or none at all (failed). POST /explorations/{id}/retry queues them again.
+    INCOMPLETE = "incomplete"
+    FAILED = "failed"
     CANCELLED = "cancelled"
+
+
+# Statuses in which nothing more happens by itself (a retry or an adaptive step may reopen
+# an incomplete or failed one).
+FINISHED_STATUSES = (
+    ExplorationStatus.DONE,
+    ExplorationStatus.INCOMPLETE,
+    ExplorationStatus.FAILED,
+    ExplorationStatus.CANCELLED,
+)
 
 
 class TileState(StrEnum):

@@ -14,7 +14,7 @@ from collections.abc import Iterable, Sequence
 from datetime import datetime, timedelta
 from typing import Any
 
-from graspscape.services.coordinator.errors import NotFound
+from graspscape.services.coordinator.errors import Conflict, NotFound
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.dialect import is_postgres
 from graspscape.services.coordinator.store.models import (
@@ -300,6 +300,14 @@ def requeue_expired(
 # the exploration's open tiles up in the (state, exploration_id, ...) index instead of reading
 # every tile of the exploration, each time a tile finishes.
 _OPEN_TILE_STATES = tuple(s for s in TileState if s not in TERMINAL_TILE_STATES)
+# An exploration is done only when every tile is done, i.e. every planned pose is stored;
+# with failed tiles it is incomplete, or failed when not a single pose was stored. Read in the
+# statement that finishes it, under the exploration's row lock (see lock_explorations).
+_ANY_FAILED = (
+    select(TileRow.id)
+    .where(TileRow.exploration_id == ExplorationRow.id, TileRow.state == TileState.FAILED)
+    .exists()
+)
 _FINISH_EXPLORATIONS = (
     update(ExplorationRow)
     .where(
@@ -310,8 +318,15 @@ _FINISH_EXPLORATIONS = (
         .where(TileRow.state.in_(_OPEN_TILE_STATES))
         .exists(),
     )
-    .values(status=ExplorationStatus.DONE, finished_at=bindparam("now"),
-            updated_at=bindparam("now"))
+    .values(
+        status=case(
+            (_ANY_FAILED & (ExplorationRow.poses_done > 0), ExplorationStatus.INCOMPLETE.value),
+            (_ANY_FAILED, ExplorationStatus.FAILED.value),
+            else_=ExplorationStatus.DONE.value,
+        ),
+        finished_at=bindparam("now"),
+        updated_at=bindparam("now"),
+    )
 )
 
 
@@ -331,8 +346,46 @@ def lock_explorations(session: Session, exploration_ids: Iterable[int]) -> None:
 def finish_complete_explorations(
     session: Session, exploration_ids: Iterable[int], *, now: datetime
 ) -> None:
-    """Mark running explorations done once none of their tiles is queued or leased."""
+    """Finish running explorations once none of their tiles is queued or leased: done when
+    every tile is done, else incomplete (some poses stored) or failed (none)."""
     ids = sorted(set(exploration_ids))
     if not ids:
         return
     session.connection().execute(_FINISH_EXPLORATIONS, {"ids": ids, "now": now})
+
+
+def retry_failed_tiles(
+    session: Session, *, exploration_id: int, now: datetime | None = None
+) -> int:
+    """Queue the failed tiles of an exploration again, with their attempts back to zero, and
+    set it running; one transaction. Returns how many tiles were queued. A cancelled
+    exploration, or one without failed tiles, is a Conflict (nothing changes). Each tile keeps
+    its last_error until it is done or fails again."""
+    now = now or utcnow()
+    lock_explorations(session, [exploration_id])
+    status = session.scalar(select(ExplorationRow.status)
+                            .where(ExplorationRow.id == exploration_id))
+    if status is None:
+        session.rollback()
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    if status == ExplorationStatus.CANCELLED:
+        session.rollback()
+        raise Conflict(f"exploration {exploration_id} is cancelled; submit it again instead")
+    requeued = session.execute(
+        update(TileRow)
+        .where(TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED)
+        .values(state=TileState.QUEUED, attempts=0, lease_owner=None, lease_expires_at=None,
+                updated_at=now)
+        .execution_options(synchronize_session=False)
+    ).rowcount  # type: ignore[attr-defined]
+    if not requeued:
+        session.rollback()
+        raise Conflict(f"exploration {exploration_id} has no failed tiles to retry")
+    session.execute(
+        update(ExplorationRow)
+        .where(ExplorationRow.id == exploration_id)
+        .values(status=ExplorationStatus.RUNNING, finished_at=None, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+    session.commit()
+    return requeued
