@@ -15,8 +15,9 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.api import explorations, health, manifolds, objects, workers
 from graspscape.services.coordinator.api.finite import validation_error_handler
@@ -25,6 +26,8 @@ from graspscape.services.coordinator.metrics import Metrics
 from graspscape.services.coordinator.settings import Settings, get_settings
 from graspscape.services.coordinator.store.queue import requeue_expired
 from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import compile_path
 
 log = logging.getLogger("graspscape.coordinator")
 
@@ -73,6 +76,27 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.engine.dispose()
 
 
+_HTTP_METHODS = {"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS", "TRACE"}
+
+
+def allowed_methods(app: FastAPI, path: str) -> list[str]:
+    """The methods the OpenAPI document lists for a request path. Starlette's 405 names only
+    those of the first route that matched the path, and FastAPI makes one route per method, so
+    a PUT to /explorations/1 said `Allow: GET` although DELETE is documented there too."""
+    documented = getattr(app.state, "documented_methods", None)
+    if documented is None:
+        documented = [
+            (compile_path(template)[0], {m.upper() for m in ops} & _HTTP_METHODS)
+            for template, ops in app.openapi()["paths"].items()
+        ]
+        app.state.documented_methods = documented
+    methods: set[str] = set()
+    for regex, ops in documented:
+        if regex.match(path):
+            methods |= ops
+    return sorted(methods)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or get_settings()
     app = FastAPI(
@@ -98,6 +122,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     # FastAPI's 422, except that it can always write what it echoes (NaN in a body was a 500).
     app.add_exception_handler(RequestValidationError, validation_error_handler)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:
+        if exc.status_code == 405:
+            methods = allowed_methods(app, request.url.path)
+            if methods:
+                exc.headers = {**(exc.headers or {}), "Allow": ", ".join(methods)}
+        return await http_exception_handler(request, exc)
 
     for router in (objects.router, explorations.router, workers.router, health.router):
         app.include_router(router)

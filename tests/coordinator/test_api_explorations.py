@@ -463,3 +463,43 @@ def test_retry_refuses_cancelled_and_unknown_explorations(
     assert client.get(f"/explorations/{eid}").json()["status"] == "cancelled"
     assert client.post("/explorations/999999/retry").status_code == 404
 
+
+def test_exploration_and_tile_ids_are_never_reused_after_delete(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    from graspscape.services.coordinator.store.models import TileRow
+    from sqlalchemy import func, select
+
+    submit(client, object_id)
+    newest = submit(client, object_id)["id"]
+    with sessions() as s:
+        top_tile = s.scalar(select(func.max(TileRow.id)))
+    assert client.delete(f"/explorations/{newest}").status_code == 204
+    again = submit(client, object_id)["id"]
+    # SQLite gave the deleted exploration's id (and its tiles' ids) to the next one: a late
+    # batch for a deleted tile could have landed on another exploration's tile.
+    assert again > newest
+    with sessions() as s:
+        first_tile = s.scalar(select(func.min(TileRow.id)).where(TileRow.exploration_id == again))
+    assert first_tile > top_tile
+
+
+@pytest.mark.parametrize(
+    ("method", "path"),
+    [("PUT", "/explorations"), ("PATCH", "/explorations/1"), ("GET", "/explorations/1/retry"),
+     ("DELETE", "/objects"), ("POST", "/explorations/1/poses"), ("PUT", "/healthz")],
+)
+def test_405_allow_header_lists_the_documented_methods(
+    client: TestClient, method: str, path: str
+) -> None:
+    from starlette.routing import compile_path
+
+    documented = {
+        m.upper()
+        for template, operations in client.get("/openapi.json").json()["paths"].items()
+        if compile_path(template)[0].match(path)
+        for m in operations
+    }
+    response = client.request(method, path)
+    assert response.status_code == 405
+    assert response.headers["allow"] == ", ".join(sorted(documented))

@@ -37,3 +37,73 @@ def test_downgrade_and_upgrade_round_trip(tmp_path) -> None:
     engine = db.make_engine(url)
     assert set(Base.metadata.tables) <= set(inspect(engine).get_table_names())
     engine.dispose()
+
+
+def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
+    """The rebuild of explorations and tiles (AUTOINCREMENT) on a database with data: with
+    foreign keys enforced, dropping the old explorations table would have deleted every
+    tile, pose and manifold by cascade."""
+    from alembic import command
+    from graspscape.services.coordinator.exploration.service import create_exploration
+    from graspscape.services.coordinator.objects.service import create_named
+    from graspscape.services.coordinator.store.ingest import ingest_results
+    from graspscape.services.coordinator.store.queue import lease_tiles
+    from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
+    from sqlalchemy import text
+
+    from tests.coordinator.helpers import fake_results
+
+    url = f"sqlite:///{tmp_path / 'old.db'}"
+    db.upgrade(url, "0005")
+    engine = db.make_engine(url)
+    sessions = db.make_sessionmaker(engine)
+    spec = {"grid": PoseGridSpec(dtheta=1.0, r_max=0.02)}
+    with sessions() as session:
+        obj, _ = create_named(session, name="sphere", properties={}, shared_dir=None)
+        for _ in range(2):
+            create_exploration(session, spec=ExplorationSpec(object_id=obj.id, **spec),
+                               tile_target_poses=10, max_poses=10**6)
+        for t in lease_tiles(session, worker_id="w", n=4, lease_seconds=60):
+            ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                           worker_id="w", results=fake_results(t.poses()))
+
+    def snapshot() -> dict[str, object]:
+        with engine.connect() as c:
+            return {
+                table: c.execute(text(f"SELECT * FROM {table} ORDER BY id")).all()
+                for table in ("explorations", "tiles", "poses", "objects")
+            }
+
+    before = snapshot()
+    assert before["poses"] and all(p.tile_id is not None for p in before["poses"])
+    engine.dispose()
+    db.upgrade(url)
+    engine = db.make_engine(url)
+    sessions = db.make_sessionmaker(engine)
+    assert snapshot() == before  # every row, id and reference kept
+    with engine.connect() as c:
+        for table in ("explorations", "tiles"):
+            sql = c.execute(text("SELECT sql FROM sqlite_master WHERE name = :t"),
+                            {"t": table}).scalar_one()
+            assert "AUTOINCREMENT" in sql, sql
+        assert c.execute(text("PRAGMA foreign_key_check")).all() == []
+        assert c.execute(text("PRAGMA foreign_keys")).scalar_one() == 1
+    with sessions() as session:  # the newest id is not handed out again
+        from graspscape.services.coordinator.exploration.service import delete_exploration
+
+        newest = max(row.id for row in before["explorations"])
+        delete_exploration(session, exploration_id=newest)
+        again = create_exploration(session, spec=ExplorationSpec(object_id=obj.id, **spec),
+                                   tile_target_poses=10, max_poses=10**6)
+        assert again.id == newest + 1
+    with engine.connect() as c:
+        context = MigrationContext.configure(c, opts={"compare_type": True})
+        assert compare_metadata(context, Base.metadata) == []
+    engine.dispose()
+    command.downgrade(db.alembic_config(url), "0005")
+    engine = db.make_engine(url)
+    with engine.connect() as c:
+        sql = c.execute(text("SELECT sql FROM sqlite_master WHERE name = 'tiles'")).scalar_one()
+        assert "AUTOINCREMENT" not in sql
+        assert c.execute(text("SELECT count(*) FROM poses")).scalar_one() == len(before["poses"])
+    engine.dispose()

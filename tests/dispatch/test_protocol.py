@@ -271,7 +271,7 @@ def test_lease_context_follows_a_reused_exploration_id(
     assert tile.object.name == "sphere"
     with any_sessions() as session:
         delete_exploration(session, exploration_id=first)
-    submit(any_sessions, tile_poses=3, object_name="cube")  # SQLite may reuse the id
+    submit(any_sessions, tile_poses=3, object_name="cube")  # SQLite reused ids before 0006
     (tile,) = lease(client, "w-1")
     assert tile.object.name == "cube"
 

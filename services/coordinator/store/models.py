@@ -77,6 +77,9 @@ class ObjectRow(Base):
 
 class ExplorationRow(Base):
     __tablename__ = "explorations"
+    # SQLite: never reuse the id of a deleted exploration (migration 0006); PostgreSQL's
+    # sequences never do.
+    __table_args__ = ({"sqlite_autoincrement": True},)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     object_id: Mapped[int] = mapped_column(ForeignKey("objects.id"), index=True)
@@ -101,6 +104,8 @@ class TileRow(Base):
         # a sort of every queued tile on each lease.
         Index("ix_tiles_queue_order", "state", "exploration_id", "level", "id"),
         Index("ix_tiles_exploration_id_state", "exploration_id", "state"),
+        # Tile ids travel on the wire: a deleted tile's id must never name another tile.
+        {"sqlite_autoincrement": True},
     )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
