@@ -19,6 +19,8 @@ from hypothesis import settings as hypothesis_settings
 from hypothesis.errors import Unsatisfiable
 from schemathesis import checks
 
+pytestmark = pytest.mark.slow
+
 EXAMPLES_PER_OPERATION = 8
 # No 5xx, and every response matches the document: its status codes, content types, headers
 # and body schemas. (Not "valid data is accepted": the spec cannot express every rule, e.g.

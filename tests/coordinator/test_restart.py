@@ -82,6 +82,7 @@ class Coordinator:
             self.process.wait(5)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(90)
 def test_restart_keeps_explorations_and_requeues_expired_leases(
     db_url: str, sessions: sessionmaker[Session], tmp_path: Path

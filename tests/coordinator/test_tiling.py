@@ -15,7 +15,10 @@ from graspscape.shared.specs.pose import tile_poses
 from pydantic import ValidationError
 
 
-@pytest.mark.parametrize("dtheta", [0.05, 0.3, math.radians(10), 1.0, math.pi / 2])
+@pytest.mark.parametrize(
+    "dtheta",
+    [pytest.param(0.05, marks=pytest.mark.slow), 0.3, math.radians(10), 1.0, math.pi / 2],
+)
 def test_every_pose_is_in_exactly_one_tile(dtheta: float) -> None:
     grid = PoseGridSpec(dtheta=dtheta, r_max=0.03, attitudes=AttitudeSpec(rolls=2, tilts=(0.2,)))
     tiles = coarse_tiles(grid, target_poses=100)

@@ -23,6 +23,8 @@ from tests.dispatch.support import (
     wait_for,
 )
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture
 def coordinator(sqlite_url: str, tmp_path: Path):

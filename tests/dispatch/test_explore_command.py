@@ -10,7 +10,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 
+
+@pytest.mark.slow
 def test_explore_maps_an_object_on_this_machine(tmp_path: Path):
     command = [sys.executable, "-m", "graspscape.shared.cli", "explore", "sphere",
                "--dtheta", "60", "--r-min", "0.02", "--r-max", "0.02", "--levels", "0",

@@ -20,6 +20,8 @@ from sqlalchemy import delete, select
 
 from tests.exploration.conftest import oracle_result
 
+pytestmark = pytest.mark.slow
+
 
 def _spec(object_id: int, **shortcuts: bool) -> ExplorationSpec:
     return ExplorationSpec(

@@ -107,7 +107,7 @@ def _overlapping_by_scan(lattice: Lattice, p: Point, level: int) -> list[Point]:
     return out
 
 
-@pytest.mark.parametrize("degrees", [90, 45, 30, 15, 10])
+@pytest.mark.parametrize("degrees", [90, 45, 30, 15, pytest.param(10, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("multiple", [1, 4, 8])
 def test_cross_neighbours_are_the_overlapping_cells_of_the_adjacent_rings(
         degrees: int, multiple: int) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 
+import pytest
 from graspscape.services.coordinator.exploration.local_run import run_local
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds import service
@@ -14,6 +15,7 @@ from graspscape.shared.specs.exploration import ExplorationSpec
 from tests.exploration.conftest import oracle_result
 
 
+@pytest.mark.slow
 def test_manifolds_refresh_while_exploring_in_steps_that_grow(sessions, named_object,
                                                               monkeypatch) -> None:
     refreshes: list[tuple[int, bool]] = []

@@ -69,6 +69,7 @@ def test_pool_gives_the_closest_donor_on_the_normal_with_the_same_links():
     assert pool.find(Pose(theta=1.2, phi=0.0, r=0.0), _grasp(), ("A_1", "B_1")) is None
 
 
+@pytest.mark.slow
 def test_sphere_poses_along_one_normal_reuse_the_matching_grasp(sphere_evaluator):
     # Approached along one direction from different distances, the hand closes on the sphere
     # the same way: later poses match an earlier one and skip the trajectory.

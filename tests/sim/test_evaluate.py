@@ -95,6 +95,7 @@ print(json.dumps(data))
 """
 
 
+@pytest.mark.slow
 def test_result_does_not_depend_on_what_the_process_evaluated_before(sphere_evaluator,
                                                                       sim_cache):
     import json
@@ -127,6 +128,7 @@ def test_start_poses_never_interpenetrate(mug_evaluator):
         assert result.outcome is Outcome.INFEASIBLE or result.effective_r > 0.0
 
 
+@pytest.mark.slow
 def test_a_mug_grasp_does_not_depend_on_what_the_evaluator_ran_before(make_evaluator):
     # The mug is several convex pieces, so a grasp makes many contact manifolds. A saved state
     # holds no contact cache: manifolds left by earlier poses changed the order in which the

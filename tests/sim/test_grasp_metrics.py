@@ -127,6 +127,7 @@ def test_pose_without_grasp_has_no_static_metrics(mug_evaluator):
     assert result.mu_g is None and result.mu_f is None and result.mu_m is None
 
 
+@pytest.mark.slow
 def test_minimum_effort_holds_and_a_clearly_lower_one_drops(make_evaluator):
     # Approached from above, the sphere hangs in the fingers: only their torque holds it.
     pose = Pose(theta=0.0, phi=0.0, r=0.02)

@@ -120,6 +120,7 @@ HANDLE_POSES = [
 ]
 
 
+@pytest.mark.slow
 def test_haptic_policy_finds_handle_grasps_the_baseline_misses(mug_evaluator, haptic_mug):
     found = []
     for pose in HANDLE_POSES:
