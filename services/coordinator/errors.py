@@ -23,6 +23,11 @@ class Conflict(CoordinatorError):
     status_code = 409
 
 
+class NotLeaseHolder(Conflict):
+    """A worker's report for a tile whose latest lease is not the one it names (another
+    worker holds it, or it was leased again since): refused whole, nothing stored."""
+
+
 class InvalidInput(CoordinatorError):
     status_code = 422
 

@@ -36,25 +36,30 @@ class Pose(BaseModel):
 
     def key(self) -> str:
         """A stable text key: equal for poses that are the same grid point."""
-        phi = math.fmod(self.phi, _TAU)
-        if phi < 0:
-            phi += _TAU
-        theta = self.theta
-        if theta < _POLE or math.pi - theta < _POLE:
-            phi = 0.0  # every azimuth is the same point at a pole
-        roll = math.fmod(self.roll, _TAU)
-        if roll < 0:
-            roll += _TAU
-        # Computed for every result on both sides of the wire: one format call, not six.
-        # `+ 0.0` turns -0.0 into 0.0.
-        return _KEY_FORMAT % (
-            round(theta, _KEY_DIGITS) + 0.0,
-            round(phi, _KEY_DIGITS) + 0.0,
-            round(self.r, _KEY_DIGITS) + 0.0,
-            round(roll, _KEY_DIGITS) + 0.0,
-            round(self.pitch, _KEY_DIGITS) + 0.0,
-            round(self.yaw, _KEY_DIGITS) + 0.0,
-        )
+        return pose_key(self.theta, self.phi, self.r, self.roll, self.pitch, self.yaw)
+
+
+def pose_key(theta: float, phi: float, r: float, roll: float = 0.0, pitch: float = 0.0,
+             yaw: float = 0.0) -> str:
+    """`Pose.key()` of these coordinates, without building (and validating) a Pose."""
+    phi = math.fmod(phi, _TAU)
+    if phi < 0:
+        phi += _TAU
+    if theta < _POLE or math.pi - theta < _POLE:
+        phi = 0.0  # every azimuth is the same point at a pole
+    roll = math.fmod(roll, _TAU)
+    if roll < 0:
+        roll += _TAU
+    # Computed for every result on both sides of the wire: one format call, not six.
+    # `+ 0.0` turns -0.0 into 0.0.
+    return _KEY_FORMAT % (
+        round(theta, _KEY_DIGITS) + 0.0,
+        round(phi, _KEY_DIGITS) + 0.0,
+        round(r, _KEY_DIGITS) + 0.0,
+        round(roll, _KEY_DIGITS) + 0.0,
+        round(pitch, _KEY_DIGITS) + 0.0,
+        round(yaw, _KEY_DIGITS) + 0.0,
+    )
 
 
 def tile_poses(
@@ -69,4 +74,40 @@ def tile_poses(
         for theta, phi in cells
         for r in r_levels
         for roll, pitch, yaw in attitudes
+    ]
+
+
+def tile_pose_keys(
+    cells: list[tuple[float, float]] | list[list[float]],
+    r_levels: list[float],
+    attitudes: list[tuple[float, float, float]] | list[list[float]],
+) -> list[str]:
+    """The keys of `tile_poses(cells, r_levels, attitudes)`, in the same order, without
+    building a Pose each. A key is its six coordinates, each formatted alone, joined by "/":
+    the parts of each cell, r level and attitude are formatted once and concatenated (the
+    coordinator checks every result batch against its tile's keys). Normalized as
+    `pose_key` does; a test holds the two equal."""
+    num = "%." + str(_KEY_DIGITS) + "f"
+    cell_parts = []
+    for theta, phi in cells:
+        phi = math.fmod(phi, _TAU)
+        if phi < 0:
+            phi += _TAU
+        if theta < _POLE or math.pi - theta < _POLE:
+            phi = 0.0
+        cell_parts.append(num % (round(theta, _KEY_DIGITS) + 0.0) + "/"
+                          + num % (round(phi, _KEY_DIGITS) + 0.0))
+    r_parts = [num % (round(r, _KEY_DIGITS) + 0.0) for r in r_levels]
+    attitude_parts = []
+    for roll, pitch, yaw in attitudes:
+        roll = math.fmod(roll, _TAU)
+        if roll < 0:
+            roll += _TAU
+        attitude_parts.append("/".join(num % (round(v, _KEY_DIGITS) + 0.0)
+                                       for v in (roll, pitch, yaw)))
+    return [
+        f"{cell}/{r}/{attitude}"
+        for cell in cell_parts
+        for r in r_parts
+        for attitude in attitude_parts
     ]

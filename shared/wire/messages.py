@@ -112,7 +112,12 @@ class ResultBatch(_Message):
 
 
 class Ack(_Message):
-    """The coordinator committed a batch (or found it already committed)."""
+    """The coordinator committed a batch (or found it already committed).
+
+    `missing`: the batch was `final` but these poses of the tile (keys) are still not stored,
+    so the tile stays with its lease holder, unfinished; the worker evaluates and sends them
+    (added with a default: version-1 peers of either age understand each other).
+    """
 
     kind: Literal["ack"] = "ack"
     tile_id: Id
@@ -120,6 +125,7 @@ class Ack(_Message):
     inserted: Count
     duplicates: Count
     tile_state: str
+    missing: list[str] = Field(default_factory=list)
 
 
 class ObjectRequest(_Message):
@@ -148,6 +154,9 @@ class ErrorCode(StrEnum):
     UNKNOWN_KIND = "unknown_kind"
     UNEXPECTED_KIND = "unexpected_kind"  # a valid message sent to the wrong key
     INVALID = "invalid"  # well formed but refused by the store (e.g. a pose key mismatch)
+    # A result batch that is not from the tile's latest lease (another worker's lease, or
+    # an older epoch): refused whole; final for that lease, the tile is someone else's now.
+    NOT_LEASE_HOLDER = "not_lease_holder"
     NOT_FOUND = "not_found"
     UNAVAILABLE = "unavailable"  # the coordinator could not serve it now; retry
     INTERNAL = "internal"

@@ -1,4 +1,5 @@
-"""Result ingest on both databases: idempotent, epoch-guarded, counted once, nothing lost."""
+"""Result ingest on both databases: idempotent, only from the lease holder, only the tile's
+poses, final only when complete, counted once, nothing lost."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from datetime import timedelta
 
 import graspscape.services.coordinator.store.ingest as ingest_module
 import pytest
-from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
 from graspscape.services.coordinator.exploration.service import cancel_exploration
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.ingest import _PER_POSE, _values, ingest_results
@@ -92,7 +93,10 @@ def test_the_same_batch_twice_leaves_one_row_per_pose(session: Session) -> None:
     assert exploration(session, eid).poses_done == len(results)
 
 
-def test_a_stale_epoch_is_stored_but_does_not_move_the_tile(session: Session) -> None:
+def test_a_report_under_an_older_epoch_is_refused_and_stores_nothing(session: Session) -> None:
+    """The slow worker's lease ran out and the tile went to another worker: its late report
+    cannot be told from a forged one (the row names only the current holder), so it is
+    refused whole; the new holder stores every pose. Until 2026-12 it was stored."""
     eid = make_exploration(session)
     past = utcnow() - timedelta(hours=1)
     (old,) = lease_tiles(session, worker_id="slow", n=1, lease_seconds=60, now=past)
@@ -102,21 +106,94 @@ def test_a_stale_epoch_is_stored_but_does_not_move_the_tile(session: Session) ->
     results = fake_results(old.poses())
     half = len(results) // 2
 
-    late = ingest_results(
-        session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow", results=results[:half]
-    )
-    assert (late.inserted, late.tile_moved, late.tile_state) == (half, False, "leased")
+    with pytest.raises(NotLeaseHolder, match="latest lease is epoch 2, state leased"):
+        ingest_results(session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow",
+                       results=results[:half])
+    assert pose_count(session, eid) == 0
     current = ingest_results(
         session, tile_id=new.tile_id, lease_epoch=2, worker_id="fast", results=results
     )
-    assert (current.inserted, current.duplicates) == (len(results) - half, half)
-    assert current.tile_moved
-    replay = ingest_results(
-        session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow", results=results
-    )
-    assert (replay.inserted, replay.tile_moved, replay.tile_state) == (0, False, "done")
+    assert (current.inserted, current.duplicates, current.tile_moved) == (len(results), 0, True)
+    with pytest.raises(NotLeaseHolder, match="latest lease is epoch 2, state done"):
+        ingest_results(session, tile_id=old.tile_id, lease_epoch=1, worker_id="slow",
+                       results=results)
     row = exploration(session, eid)
     assert row.poses_done == len(results) == pose_count(session, eid)
+
+
+def test_a_worker_that_does_not_hold_the_lease_cannot_store_or_finish_the_tile(
+    session: Session,
+) -> None:
+    eid = make_exploration(session)
+    (t,) = lease_tiles(session, worker_id="w1", n=1, lease_seconds=60)
+    results = fake_results(t.poses())
+    for epoch, match in ((t.lease_epoch, "leased to w1 under epoch 1, not to intruder"),
+                         (t.lease_epoch + 1, "no lease of epoch 2")):
+        with pytest.raises(NotLeaseHolder, match=match):
+            ingest_results(session, tile_id=t.tile_id, lease_epoch=epoch,
+                           worker_id="intruder", results=results)
+    assert pose_count(session, eid) == 0
+    row = session.get(TileRow, t.tile_id)
+    assert row is not None and (row.state, row.lease_owner) == ("leased", "w1")
+    assert exploration(session, eid).poses_done == 0
+    # The holder's own report goes through.
+    report = ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                            worker_id="w1", results=results)
+    assert (report.inserted, report.tile_moved) == (len(results), True)
+
+
+def test_a_tile_never_leased_takes_no_report(session: Session) -> None:
+    eid = make_exploration(session)
+    tile_id = session.scalar(select(TileRow.id).where(TileRow.exploration_id == eid))
+    assert tile_id is not None
+    with pytest.raises(NotLeaseHolder, match="it was never leased"):
+        ingest_results(session, tile_id=tile_id, lease_epoch=0, worker_id="w", results=[])
+    assert session.get(TileRow, tile_id).state == "queued"  # type: ignore[union-attr]
+
+
+def test_a_batch_with_a_pose_of_another_tile_is_refused_whole(session: Session) -> None:
+    eid = make_exploration(session)
+    mine, other = lease_tiles(session, worker_id="w", n=2, lease_seconds=60)
+    results = fake_results(mine.poses())
+    stranger = fake_results(other.poses())[0]
+    made_up = fake_results([Pose(theta=1.234, phi=0.5, r=0.015)])[0]
+    with pytest.raises(InvalidInput, match=r"2 pose\(s\) of the batch are not poses of") as refused:
+        ingest_results(session, tile_id=mine.tile_id, lease_epoch=mine.lease_epoch,
+                       worker_id="w", results=[*results, stranger, made_up])
+    assert stranger.pose_key in refused.value.message
+    assert made_up.pose_key in refused.value.message
+    # Another tile's poses, all of them, under this tile: refused too.
+    with pytest.raises(InvalidInput, match="not poses of tile"):
+        ingest_results(session, tile_id=mine.tile_id, lease_epoch=mine.lease_epoch,
+                       worker_id="w", results=fake_results(other.poses()))
+    assert pose_count(session, eid) == 0
+    assert session.get(TileRow, mine.tile_id).state == "leased"  # type: ignore[union-attr]
+    assert exploration(session, eid).poses_done == 0
+
+
+def test_final_finishes_the_tile_only_once_every_pose_is_stored(session: Session) -> None:
+    eid = make_exploration(session)
+    t = max(lease_tiles(session, worker_id="w", n=3, lease_seconds=60),
+            key=lambda tile: len(tile.poses()))
+    results = fake_results(t.poses())
+    half = len(results) // 2
+    assert half >= 2
+    everything = sorted(r.pose_key for r in results)
+
+    empty = ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                           worker_id="w", results=[], final=True)
+    assert (empty.tile_moved, empty.tile_state, empty.missing) == (False, "leased", everything)
+    first = ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                           worker_id="w", results=results[:half], final=True)
+    assert (first.inserted, first.tile_moved, first.tile_state) == (half, False, "leased")
+    assert first.missing == sorted(r.pose_key for r in results[half:])
+    assert exploration(session, eid).poses_done == half
+    # The rest alone completes it: the stored half is read back from the store.
+    rest = ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                          worker_id="w", results=results[half:], final=True)
+    assert (rest.inserted, rest.tile_moved, rest.tile_state, rest.missing) == (
+        len(results) - half, True, "done", [])
+    assert pose_count(session, eid) == len(results)
 
 
 def test_partial_batches_do_not_finish_the_tile(session: Session) -> None:
@@ -298,13 +375,14 @@ def test_concurrent_reports_of_the_same_tiles_count_each_pose_once(
     def report(offset: int) -> None:
         try:
             with sessions() as s:
-                # Every thread sends every tile (retries, duplicates), in a different order.
+                # Every thread sends every tile (the holder's retries and duplicates), in a
+                # different order.
                 for t, results in batches[offset:] + batches[:offset]:
                     r = ingest_results(
                         s,
                         tile_id=t.tile_id,
                         lease_epoch=t.lease_epoch,
-                        worker_id=f"w{offset}",
+                        worker_id="w",
                         results=results,
                     )
                     if r.tile_moved:

@@ -381,3 +381,165 @@ def test_a_timed_out_batch_is_sent_again_until_acknowledged_stored_and_evaluated
         assert sorted(keys_stored) == sorted(evaluated)  # stored once
         assert (row.state, row.attempts, row.lease_epoch) == ("done", 1, tile.lease_epoch)
         assert exploration.poses_done == 3
+
+
+# -- ingest trusts only the lease holder, only the tile's poses, final only when complete ----
+
+
+def instant_worker(dispatcher: Dispatcher, name: str):  # -> WorkerProcess
+    """A worker process without physics, on its own session to the dispatcher, driven by the
+    test (its _lease, _work and _settle) instead of its loop."""
+    from graspscape.workers.runtime.config import WorkerConfig
+    from graspscape.workers.runtime.process import WorkerProcess
+
+    config = WorkerConfig(connect=dispatcher.zs.listen, procs=1, name=name, instant=True,
+                          query_timeout_s=5, backoff_min_s=0.05, backoff_max_s=0.2)
+    worker = WorkerProcess(config, 0)
+    worker.session = zenoh.open(zenoh_config(mode="client", connect=dispatcher.zs.listen))
+    return worker
+
+
+def test_a_batch_from_a_worker_that_does_not_hold_the_lease_is_refused(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    """A worker id that does not hold the tile's lease could finish it (and fail it) until
+    2026-12: now every report of it is refused before anything is stored or moved."""
+    exploration_id = submit(any_sessions, tile_poses=3)
+    (tile,) = lease(client, "w-1")
+    key = keys.results_key(tile.tile_id, tile.lease_epoch)
+    forged = [
+        ResultBatch(worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                    results=made_up(tile)),
+        ResultBatch(worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                    results=[], final=False, error="forged failure"),
+        ResultBatch(worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                    results=[], final=False, release=True),
+        ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch + 1,
+                    results=made_up(tile)),
+    ]
+    refusals = []
+    for batch in forged:
+        ((where, message),) = ask(client, key, encode(batch))
+        assert where == "error" and isinstance(message, ErrorReply), message
+        assert message.code == ErrorCode.NOT_LEASE_HOLDER and not message.code.retryable
+        refusals.append(message.message)
+    assert "leased to w-1 under epoch 1, not to w-intruder" in refusals[0]
+    assert "no lease of epoch 2" in refusals[-1]
+    with any_sessions() as session:
+        row = session.get(TileRow, tile.tile_id)
+        assert (row.state, row.lease_owner, row.attempts, row.last_error) == (
+            "leased", "w-1", 1, None)
+        assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
+        assert session.get(ExplorationRow, exploration_id).status == "running"
+    # The holder's batch is taken.
+    (reply,) = ask(client, key, encode(ResultBatch(
+        worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+        results=made_up(tile))))
+    assert isinstance(reply[1], Ack) and reply[1].tile_state == "done"
+
+
+def test_a_batch_with_a_pose_of_another_tile_is_refused_with_its_key(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    submit(any_sessions, tile_poses=3)
+    mine, other = lease(client, "w-1", capacity=2)
+    stranger = made_up(other)[1]
+    batch = ResultBatch(worker_id="w-1", tile_id=mine.tile_id, lease_epoch=mine.lease_epoch,
+                        results=[*made_up(mine), stranger])
+    ((where, message),) = ask(client, keys.results_key(mine.tile_id, mine.lease_epoch),
+                              encode(batch))
+    assert where == "error" and message.code == ErrorCode.INVALID, message
+    assert stranger.pose_key in message.message and f"tile {mine.tile_id}" in message.message
+    with any_sessions() as session:
+        assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
+        assert session.get(TileRow, mine.tile_id).state == "leased"
+
+
+def test_final_with_half_the_poses_leaves_the_tile_open_and_says_what_is_missing(
+    client: zenoh.Session, any_sessions: sessionmaker[Session]
+) -> None:
+    exploration_id = submit(any_sessions, tile_poses=6, r_max=0.06)  # 6 r levels a cell
+    (tile,) = lease(client, "w-1")
+    results = made_up(tile)
+    assert len(results) == 6
+    key = keys.results_key(tile.tile_id, tile.lease_epoch)
+    ((_, ack),) = ask(client, key, encode(ResultBatch(
+        worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+        results=results[:3], final=True)))
+    assert isinstance(ack, Ack), ack
+    assert (ack.inserted, ack.tile_state) == (3, "leased")
+    assert ack.missing == sorted(r.pose_key for r in results[3:])
+    with any_sessions() as session:
+        assert session.get(TileRow, tile.tile_id).state == "leased"
+        exploration = session.get(ExplorationRow, exploration_id)
+        assert (exploration.status, exploration.poses_done) == ("running", 3)
+    ((_, ack),) = ask(client, key, encode(ResultBatch(
+        worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+        results=results[3:], final=True)))
+    assert isinstance(ack, Ack) and (ack.inserted, ack.tile_state, ack.missing) == (
+        3, "done", [])
+
+
+def test_the_worker_evaluates_and_sends_the_poses_the_coordinator_misses(
+    dispatcher: Dispatcher, any_sessions: sessionmaker[Session],
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A final batch that lacks a pose (here the worker's batch loses its last result) no
+    longer finishes the tile: the ack lists the pose, the worker evaluates it and sends it;
+    then the tile is done with every pose stored."""
+    exploration_id = submit(any_sessions, tile_poses=3)
+    worker = instant_worker(dispatcher, "gappy")
+    make_batch = worker._batch
+    dropped: list[str] = []
+
+    def lossy(tile, results, **kwargs):  # type: ignore[no-untyped-def]
+        if kwargs.get("final") and not dropped and len(results) > 1:
+            dropped.append(results[-1].pose_key)
+            results = results[:-1]
+        return make_batch(tile, results, **kwargs)
+
+    worker._batch = lossy  # type: ignore[method-assign]
+    caplog.set_level("WARNING", logger="graspscape.worker")
+    try:
+        (tile,) = worker._lease()
+        worker._work(tile)
+        ack = worker._settle()
+    finally:
+        worker.session.close()
+    assert dropped and isinstance(ack, Ack)
+    assert (ack.tile_state, ack.missing, ack.inserted) == ("done", [], 1)
+    assert "misses 1 pose(s) of its final batch" in caplog.text
+    with any_sessions() as session:
+        stored = session.scalars(select(PoseRow.pose_key)
+                                 .where(PoseRow.exploration_id == exploration_id)).all()
+        assert sorted(stored) == sorted(p.key() for p in tile.poses())
+        assert session.get(TileRow, tile.tile_id).state == "done"
+
+
+def test_a_worker_whose_lease_went_elsewhere_drops_its_batch_for_good(
+    dispatcher: Dispatcher, any_sessions: sessionmaker[Session],
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Its lease ran out and the tile was leased again meanwhile: the batch is refused as
+    not the lease holder's, and the worker neither stores it nor resends it."""
+    from sqlalchemy import update
+
+    submit(any_sessions, tile_poses=3)
+    worker = instant_worker(dispatcher, "late")
+    caplog.set_level("WARNING", logger="graspscape.worker")
+    try:
+        (tile,) = worker._lease()
+        with any_sessions() as session:  # expired and re-leased to another worker
+            session.execute(update(TileRow).where(TileRow.id == tile.tile_id).values(
+                lease_owner="w-next", lease_epoch=tile.lease_epoch + 1))
+            session.commit()
+        worker._work(tile)
+        ack = worker._settle()
+    finally:
+        worker.session.close()
+    assert ack is None
+    assert "dropped, the lease is gone" in caplog.text and "sending it again" not in caplog.text
+    with any_sessions() as session:
+        assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
+        row = session.get(TileRow, tile.tile_id)
+        assert (row.state, row.lease_owner) == ("leased", "w-next")

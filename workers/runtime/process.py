@@ -32,6 +32,7 @@ from graspscape.shared.wire import keys
 from graspscape.shared.wire.codec import decode_as, decode_reply_error, encode
 from graspscape.shared.wire.messages import (
     Ack,
+    ErrorCode,
     LeaseRequest,
     ResultBatch,
     TileLease,
@@ -160,20 +161,29 @@ class WorkerProcess:
         return tiles
 
     def _work(self, tile: TileLease) -> None:
-        poses = tile.poses()
+        batch = self._evaluate_tile(tile, tile.poses())
+        if batch is not None:
+            self._send(batch, tile)
+            self.poses_done += len(batch.results)
+            self.tiles_done += batch.final
+
+    def _evaluate_tile(self, tile: TileLease, poses: list[Pose]) -> ResultBatch | None:
+        """Evaluate these poses of a tile: the batch to send (`final` when every one was
+        evaluated, else `release` of the rest: told to stop), or None when the tile was
+        reported failed or handed back here already."""
         results: list[PoseResult] = []
         try:
             obj = None if self.config.instant else self.objects.spec(tile.object)
         except ObjectFetchError as exc:
             if not exc.transient:  # no such mesh, or a corrupt one: the tile fails here
                 self._deliver(self._batch(tile, [], final=False, error=str(exc)))
-                return
+                return None
             # The coordinator is unreachable right now: not the tile's fault, so it goes
             # back uncounted (delivered once the coordinator answers again).
             log.warning("%s: tile %d handed back: %s", self.worker_id, tile.tile_id, exc)
             self._deliver(self._batch(tile, [], final=False, release=True))
             self.stop.wait(self.config.backoff_max_s)
-            return
+            return None
         donors = self._donors(tile)
         try:
             for pose in poses:
@@ -186,11 +196,38 @@ class WorkerProcess:
             log.exception("%s: tile %d failed", self.worker_id, tile.tile_id)
             self._deliver(self._batch(tile, results, final=False,
                                       error=f"{type(exc).__name__}: {exc}"))
-            return
+            return None
         final = len(results) == len(poses)
-        self._send(self._batch(tile, results, final=final, release=not final))
-        self.poses_done += len(results)
-        self.tiles_done += final
+        return self._batch(tile, results, final=final, release=not final)
+
+    def _complete(self, delivery: _Delivery, ack: Ack) -> None:
+        """The coordinator stored a final batch but misses poses of the tile (`ack.missing`),
+        so the tile is still leased to this process, unfinished. Evaluate those poses and
+        send them, once, as the tile's final batch (in flight like any other). If they are
+        not poses of this process's copy of the tile, or still missing after that, the tile
+        is reported failed with the reason (an attempt counted, the reason in its
+        last_error), so it never goes round for good."""
+        tile = delivery.tile
+        assert tile is not None
+        wanted = set(ack.missing)
+        poses = [pose for pose in tile.poses() if pose.key() in wanted]
+        unknown = wanted - {pose.key() for pose in poses}
+        if delivery.round or unknown:
+            why = ("still misses after they were sent again" if delivery.round else
+                   "misses, not in this worker's copy of the tile,")
+            shown = sorted(unknown or wanted)
+            reason = (f"the coordinator {why} {len(shown)} poses: {', '.join(shown[:5])}"
+                      f"{' …' if len(shown) > 5 else ''}")
+            log.error("%s: tile %d: %s; reporting the tile failed", self.worker_id,
+                      tile.tile_id, reason)
+            self._deliver(self._batch(tile, [], final=False, error=reason))
+            return
+        log.warning("%s: tile %d: the coordinator misses %d pose(s) of its final batch; "
+                    "evaluating them again", self.worker_id, tile.tile_id, len(poses))
+        batch = self._evaluate_tile(tile, poses)
+        if batch is not None:
+            self.pending = self._query(batch, tile=tile, round_=delivery.round + 1)
+            self.poses_done += len(batch.results)
 
     def _donors(self, tile: TileLease):
         """Shortcut 2's pool for this tile (filled in the tile's pose order), if asked for."""
@@ -219,19 +256,28 @@ class WorkerProcess:
         self._settle()
         return self._await(self._query(batch))
 
-    def _send(self, batch: ResultBatch) -> None:
+    def _send(self, batch: ResultBatch, tile: TileLease | None = None) -> None:
         """Send a batch and go on: its acknowledgement is read after the next tile, so the
         coordinator commits one batch while this process evaluates the next. One batch at
-        most is in flight; until its ack, it is retried as _deliver does."""
+        most is in flight; until its ack, it is retried as _deliver does. `tile`: the lease
+        of a final batch, kept to evaluate poses the coordinator reports missing."""
         self._settle()
-        self.pending = self._query(batch)
+        self.pending = self._query(batch, tile=tile if batch.final else None)
 
     def _settle(self) -> Ack | None:
-        """Wait for the batch in flight, if any, to be acknowledged (or given up)."""
-        pending, self.pending = self.pending, None
-        return self._await(pending) if pending is not None else None
+        """Wait for the batch in flight, if any, to be acknowledged (or given up). A final
+        batch whose ack lists missing poses is completed first (_complete), which puts the
+        completing batch in flight; it is settled here too."""
+        ack = None
+        while self.pending is not None:
+            pending, self.pending = self.pending, None
+            ack = self._await(pending)
+            if ack is not None and ack.missing and pending.tile is not None:
+                self._complete(pending, ack)
+        return ack
 
-    def _query(self, batch: ResultBatch, payload: bytes | None = None) -> _Delivery:
+    def _query(self, batch: ResultBatch, payload: bytes | None = None,
+               tile: TileLease | None = None, round_: int = 0) -> _Delivery:
         payload = payload if payload is not None else encode(batch)
         key = keys.results_key(batch.tile_id, batch.lease_epoch)
         try:
@@ -244,7 +290,7 @@ class WorkerProcess:
         except zenoh.ZError as exc:
             log.warning("%s: sending tile %d failed: %s", self.worker_id, batch.tile_id, exc)
             replies = None
-        return _Delivery(batch, payload, replies)
+        return _Delivery(batch, payload, replies, tile, round_)
 
     def _await(self, delivery: _Delivery) -> Ack | None:
         """Read a sent batch's answer; send it again until the coordinator acknowledges it."""
@@ -261,6 +307,13 @@ class WorkerProcess:
                         message = decode_reply_error(reply.err.payload.to_bytes())
                     if isinstance(message, Ack):
                         return message
+                    if message.code == ErrorCode.NOT_LEASE_HOLDER:
+                        # The tile's lease is no longer this process's (it ran out and the
+                        # tile went to another worker): nothing to resend, the holder now
+                        # evaluates it.
+                        log.warning("%s: batch of tile %d dropped, the lease is gone: %s",
+                                    self.worker_id, batch.tile_id, message.message)
+                        return None
                     if not message.code.retryable:
                         log.error("%s: batch of tile %d refused for good: %s: %s",
                                   self.worker_id, batch.tile_id, message.code, message.message)
@@ -275,7 +328,7 @@ class WorkerProcess:
                           "again by the coordinator", self.worker_id, batch.tile_id)
                 return None
             time.sleep(backoff.next())
-            delivery = self._query(batch, delivery.payload)
+            delivery = self._query(batch, delivery.payload, delivery.tile, delivery.round)
 
 
 @dataclass
@@ -285,6 +338,8 @@ class _Delivery:
     batch: ResultBatch
     payload: bytes
     replies: Any  # zenoh's reply handler; None when the query could not be sent
+    tile: TileLease | None = None  # a final batch's lease, to complete it (_complete)
+    round: int = 0  # 1: the batch that completes a tile the coordinator found incomplete
 
 
 def _instant_result(pose: Pose) -> PoseResult:

@@ -24,7 +24,7 @@ from graspscape.services.coordinator.dispatch.leases import (
     release_unheld,
     requeue_lost,
 )
-from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
 from graspscape.services.coordinator.settings import Settings
 from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.queue import fail_tile, lease_tiles
@@ -277,6 +277,10 @@ class Dispatcher:
                           duplicates=0, tile_state="deleted")
                 query.reply(str(query.key_expr), encode(ack))
                 return None
+            except NotLeaseHolder as exc:
+                # Not from the tile's latest lease (another worker's, or re-leased since):
+                # refused before anything is stored, failed or released.
+                return error(ErrorCode.NOT_LEASE_HOLDER, exc.message)
             except InvalidInput as exc:
                 return error(ErrorCode.INVALID, exc.message)
             state = report.tile_state
@@ -299,6 +303,7 @@ class Dispatcher:
             inserted=report.inserted,
             duplicates=report.duplicates,
             tile_state=str(state),
+            missing=report.missing,
         )
         # Sent only now, after the batch is committed: the reply is the acknowledgement.
         query.reply(str(query.key_expr), encode(ack))

@@ -2,10 +2,18 @@
 
 `INSERT … ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable` stores each pose
 once and tells exactly which rows are new, so the exploration's counters only count those: a
-batch sent twice (a retry, or a late report from an expired lease) leaves the same rows and
-the same counts. The tile moves to done only under its current lease epoch (leased, or
-queued again after expiry but not yet re-leased). Results are stored even when they cannot
-move the tile (stale epoch, cancelled exploration): computed poses are never thrown away.
+batch sent twice (a retry after a lost ack) leaves the same rows and the same counts.
+
+A batch is taken only from the tile's latest lease: its epoch must be the tile's current
+`lease_epoch`, and while the tile is leased its worker must be the `lease_owner`. Anything
+else (another worker's id, an older epoch: the tile was leased again since) is refused whole
+with NotLeaseHolder and stores nothing. Once the latest lease ended without a new one (expired
+or lost and queued again, cancelled, failed) the row names no holder any more; a report under
+that epoch is still taken, since its poses can only be the tile's own (below) and storing
+them loses nothing. Every result must be a pose of the tile (its cells × r levels ×
+attitudes): one foreign pose refuses the whole batch. `final` finishes the tile (leased, or
+queued under the same epoch) only when every pose of the tile is stored after the batch;
+otherwise the batch is stored and the report lists the poses still missing.
 """
 
 from __future__ import annotations
@@ -16,7 +24,7 @@ from datetime import datetime
 from functools import lru_cache
 from typing import Any
 
-from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
 from graspscape.services.coordinator.exploration.adaptive import after_ingest
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
@@ -28,6 +36,7 @@ from graspscape.services.coordinator.store.models import (
     TileState,
 )
 from graspscape.services.coordinator.store.queue import finish_complete_explorations
+from graspscape.shared.specs.pose import tile_pose_keys
 from graspscape.shared.specs.results import PoseResult
 from pydantic import BaseModel
 from pydantic_core import to_json
@@ -40,6 +49,9 @@ class IngestReport(BaseModel):
     duplicates: int
     tile_state: str
     tile_moved: bool  # this batch moved the tile leased → done
+    # With `final`: the tile's poses that are not stored even after this batch (sorted), so
+    # the tile did not move; empty when it moved or could not move anyway.
+    missing: list[str] = []
 
 
 def _json_text(model: BaseModel | None) -> str | None:
@@ -208,9 +220,17 @@ def _insert_new(session: Session, batch: tuple[Any, ...], rows: list[tuple[Any, 
 
 
 # The statements of every batch, built once (building them took longer than running them).
-_TILE = select(TileRow.exploration_id, TileRow.state, TileRow.lease_epoch).where(
-    TileRow.id == bindparam("tile_id")
+_TILE = select(
+    TileRow.exploration_id, TileRow.state, TileRow.lease_epoch, TileRow.lease_owner,
+    TileRow.cells, TileRow.r_levels, TileRow.attitudes,
+).where(TileRow.id == bindparam("tile_id"))
+# Which of some pose keys an exploration has stored (the unique index's own columns).
+_STORED = select(PoseRow.pose_key).where(
+    PoseRow.exploration_id == bindparam("exploration_id"),
+    PoseRow.pose_key.in_(bindparam("keys", expanding=True)),
 )
+_KEY_CHUNK = 500
+_SHOWN_KEYS = 10
 # The exploration's counters; it returns the status and creation time the adaptive hook needs.
 _COUNT = (
     update(ExplorationRow)
@@ -240,6 +260,35 @@ _FINISH_TILE = (
 )
 
 
+def _not_holder(tile: Any, tile_id: int, lease_epoch: int, worker_id: str) -> str | None:
+    """Why a report under (worker_id, lease_epoch) is not from the tile's latest lease, or
+    None when it is."""
+    if tile.lease_epoch < 1 or lease_epoch != tile.lease_epoch:
+        latest = (f"its latest lease is epoch {tile.lease_epoch}" if tile.lease_epoch >= 1
+                  else "it was never leased")
+        return (f"tile {tile_id} has no lease of epoch {lease_epoch} to report for ({latest}, "
+                f"state {tile.state}): a late or forged report, nothing of it stored")
+    if tile.state == TileState.LEASED and tile.lease_owner != worker_id:
+        return (f"tile {tile_id} is leased to {tile.lease_owner} under epoch {lease_epoch}, "
+                f"not to {worker_id}: nothing of the report stored")
+    return None
+
+
+def _shown(keys: Sequence[str]) -> str:
+    more = len(keys) - _SHOWN_KEYS
+    return ", ".join(keys[:_SHOWN_KEYS]) + (f" and {more} more" if more > 0 else "")
+
+
+def _stored_keys(connection: Any, exploration_id: int, keys: Sequence[str]) -> set[str]:
+    stored: set[str] = set()
+    for start in range(0, len(keys), _KEY_CHUNK):
+        stored.update(connection.execute(
+            _STORED,
+            {"exploration_id": exploration_id, "keys": list(keys[start : start + _KEY_CHUNK])},
+        ).scalars())
+    return stored
+
+
 def ingest_results(
     session: Session,
     *,
@@ -250,7 +299,12 @@ def ingest_results(
     final: bool = True,
     now: datetime | None = None,
 ) -> IngestReport:
-    """Store a batch of results of one tile; with `final`, the tile is finished by it."""
+    """Store a batch of results of one tile; with `final`, the tile is finished by it once
+    every pose of the tile is stored.
+
+    Raises NotFound (no such tile), NotLeaseHolder (not from the tile's latest lease) or
+    InvalidInput (a result whose key does not match its pose, or a pose not of this tile);
+    a refused batch stores nothing."""
     now = now or utcnow()
     session.flush()  # what the session holds goes first, as autoflush would do it
     connection = session.connection()
@@ -258,7 +312,16 @@ def ingest_results(
     if tile is None:
         session.rollback()
         raise NotFound(f"tile {tile_id} does not exist (was its exploration deleted?)")
+    refusal = _not_holder(tile, tile_id, lease_epoch, worker_id)
+    if refusal is not None:
+        session.rollback()
+        raise NotLeaseHolder(refusal)
+    # The tile's pose keys (its cells × r levels × attitudes, as the worker expands them;
+    # refinement and search tiles are such products too, exploration/tiling.group_tiles).
+    tile_keys = (frozenset(tile_pose_keys(tile.cells, tile.r_levels, tile.attitudes))
+                 if results or final else frozenset())
     rows: dict[str, tuple[Any, ...]] = {}
+    foreign: list[str] = []
     robustness = any(result.robustness is not None for result in results)
     for result in results:
         key = result.pose.key()
@@ -267,7 +330,16 @@ def ingest_results(
             raise InvalidInput(
                 f"result pose_key {result.pose_key!r} does not match its pose (key {key!r})"
             )
+        if key not in tile_keys:
+            foreign.append(key)
         rows[key] = _values(result, robustness)
+    if foreign:
+        session.rollback()
+        foreign = sorted(set(foreign))
+        raise InvalidInput(
+            f"{len(foreign)} pose(s) of the batch are not poses of tile {tile_id}: "
+            f"{_shown(foreign)}; the whole batch is refused, nothing of it stored"
+        )
 
     inserted = viable = 0
     if rows:
@@ -280,10 +352,10 @@ def ingest_results(
 
     moved = False
     state = tile.state
-    # The lease under which the results were computed is the tile's current one when the
-    # epochs match. Its tile may be `queued` if the lease ran out but nobody re-leased it
-    # yet: the complete result then still finishes it, sparing a second evaluation.
-    movable = final and tile.state in _MOVABLE and tile.lease_epoch == lease_epoch
+    # The epochs match (checked above). The tile may be `queued` if the lease ran out but
+    # nobody re-leased it yet: the complete result then still finishes it, sparing a second
+    # evaluation.
+    movable = final and tile.state in _MOVABLE
     exploration = None
     if inserted or movable:
         # The counters first: the exploration row's lock, held to the commit, makes the
@@ -296,6 +368,14 @@ def ingest_results(
             {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
              "now": now},
         ).one()
+    missing: list[str] = []
+    if movable and len(rows) < len(tile_keys):
+        # Not every pose of the tile is in the batch (rows ⊆ tile_keys): the tile is done
+        # only if the rest is stored already. One query, under the row lock above, so it
+        # reads the batches of this tile committed before; a complete batch never asks.
+        absent = sorted(tile_keys.difference(rows))
+        missing = sorted(set(absent) - _stored_keys(connection, tile.exploration_id, absent))
+        movable = not missing
     if movable:
         done = connection.execute(
             _FINISH_TILE, {"tile_id": tile_id, "epoch": lease_epoch, "now": now}
@@ -314,5 +394,6 @@ def ingest_results(
         )
     session.commit()
     return IngestReport(
-        inserted=inserted, duplicates=len(results) - inserted, tile_state=state, tile_moved=moved
+        inserted=inserted, duplicates=len(results) - inserted, tile_state=state, tile_moved=moved,
+        missing=missing,
     )

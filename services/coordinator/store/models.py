@@ -119,8 +119,9 @@ class TileRow(Base):
     state: Mapped[str] = mapped_column(String(16), default=TileState.QUEUED)
     lease_owner: Mapped[str | None] = mapped_column(String(128))
     lease_expires_at: Mapped[datetime | None] = mapped_column()
-    # Bumped on every lease; results carry the epoch they were leased under, so a late report
-    # from a lease that already expired cannot move the tile a second time.
+    # Bumped on every lease; results carry the epoch they were leased under, and ingest takes
+    # them only under the tile's current epoch (and from lease_owner while it is leased), so
+    # a late report from a lease that was given to another worker is refused.
     lease_epoch: Mapped[int] = mapped_column(Integer, default=0)
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     last_error: Mapped[str | None] = mapped_column(Text)

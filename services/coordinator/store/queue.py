@@ -4,8 +4,8 @@ Each function is one transaction and commits it. Leasing is a single
 `UPDATE … WHERE id IN (SELECT … LIMIT n) RETURNING …`: on PostgreSQL the inner SELECT takes
 `FOR UPDATE SKIP LOCKED`, so concurrent leasers never get the same tile nor wait on each
 other; on SQLite the statement runs under the single write lock, which gives the same.
-Every lease bumps the tile's `lease_epoch`; a report made under an older epoch can still be
-stored but never moves the tile again.
+Every lease bumps the tile's `lease_epoch`; ingest refuses a report made under an older
+epoch (store/ingest.py), so it never moves the tile again.
 """
 
 from __future__ import annotations
