@@ -199,6 +199,7 @@ def _comparable(result):
     return data
 
 
+@pytest.mark.slow
 def test_real_grasp_of_the_sphere_from_above_lies_between_the_anchors(sphere_evaluator):
     ev = sphere_evaluator
     result, report = ev.robustness(FROM_ABOVE)
@@ -273,6 +274,7 @@ def test_tests_chosen_in_the_settings_run_on_every_held_evaluation(make_evaluato
     assert empty.robustness == RobustnessReport()
 
 
+@pytest.mark.slow
 def test_a_fingertip_clamp_ranks_below_a_body_wrap_of_the_same_mug(mug_evaluator):
     # The pair under the default task: a two-fingertip clamp of the rim (A_3 and B_3
     # only) and the wrap of the body in docs/simulation.md's picture. Both hold, and μs cannot
