@@ -30,6 +30,8 @@ def _settings(args: argparse.Namespace):  # -> Settings
             "mode": getattr(args, "zenoh_mode", None),
             "listen": getattr(args, "zenoh_listen", None),
             "connect": getattr(args, "zenoh_connect", None),
+            "users_file": getattr(args, "zenoh_users_file", None),
+            "allow_unauthenticated": getattr(args, "zenoh_allow_unauthenticated", None),
         }.items()
         if v is not None
     }
@@ -140,6 +142,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         metavar="ENDPOINT",
         help="zenoh router to connect to, e.g. tcp/router:7447 (repeatable)",
+    )
+    serve.add_argument(
+        "--zenoh-users-file",
+        metavar="FILE",
+        help="zenoh dictionary (user:password lines) of the workers the peer accepts; or set "
+        "GRASPSCAPE_ZENOH__PASSWORD (and __USER, default graspscape) for one shared login",
+    )
+    serve.add_argument(
+        "--zenoh-allow-unauthenticated",
+        action="store_true",
+        default=None,
+        help="listen beyond loopback without authentication (refused otherwise)",
     )
     serve.set_defaults(handler=_serve)
 

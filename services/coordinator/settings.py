@@ -13,7 +13,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator, model_validator
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -50,6 +50,63 @@ class ZenohSettings(BaseModel):
         ge=0.0,
         description="after start, leases of workers not alive by then go back to the queue",
     )
+    # Access control (zenoh usrpwd, docs/protocol.md "Access control"). The password comes
+    # from the environment (GRASPSCAPE_ZENOH__PASSWORD), never the config file.
+    user: str = Field(
+        default="graspscape", pattern=r"^[^:\s]{1,64}$",
+        description="user name of `password`: presented to routers in `connect`, and the one "
+        "workers log in with when no users_file is given",
+    )
+    password: SecretStr | None = Field(
+        default=None,
+        description="when set, the embedded peer accepts only sessions logging in as `user` "
+        "with it (or an entry of users_file), and this coordinator logs in with it",
+    )
+    users_file: Path | None = Field(
+        default=None,
+        description="zenoh dictionary file (`user:password` per line) of the workers the "
+        "embedded peer accepts; unset with a password: `user` with `password` alone",
+    )
+    allow_unauthenticated: bool = Field(
+        default=False,
+        description="let the embedded peer listen beyond loopback without authentication "
+        "(a trusted network, or zenoh TLS configured outside this file)",
+    )
+
+    @field_validator("password", "users_file", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        # `GRASPSCAPE_ZENOH__PASSWORD=` (compose passes unset variables so) means no password.
+        return None if value == "" else value
+
+    @property
+    def authenticates(self) -> bool:
+        """Whether the embedded peer checks who connects (a password or a users file)."""
+        return self.password is not None or self.users_file is not None
+
+    def listen_refusal(self) -> str | None:
+        """Why this peer must not listen as configured, or None: listening beyond loopback
+        needs authentication unless `allow_unauthenticated` says otherwise."""
+        if self.mode != "peer" or self.authenticates or self.allow_unauthenticated:
+            return None
+        from graspscape.shared.wire.session import is_local_endpoint
+
+        exposed = [endpoint for endpoint in self.listen if not is_local_endpoint(endpoint)]
+        if not exposed:
+            return None
+        return (
+            f"zenoh would listen on {', '.join(exposed)}, beyond this host, without "
+            "authentication: set GRASPSCAPE_ZENOH__PASSWORD (workers then log in with "
+            "GRASPSCAPE_ZENOH__USER/__PASSWORD or --zenoh-user/--zenoh-password-file) or "
+            "users_file, or accept any worker that reaches the port with "
+            "allow_unauthenticated (--zenoh-allow-unauthenticated)"
+        )
+
+    @model_validator(mode="after")
+    def _listen_safely(self) -> ZenohSettings:
+        if self.enabled and (refusal := self.listen_refusal()) is not None:
+            raise ValueError(refusal)
+        return self
 
 
 class Settings(BaseSettings):

@@ -3,7 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
+
+
+def _password(args: argparse.Namespace) -> str | None:
+    """--zenoh-password-file (its first line), else GRASPSCAPE_ZENOH__PASSWORD; empty: none."""
+    if args.zenoh_password_file is not None:
+        lines = args.zenoh_password_file.read_text().splitlines()
+        return (lines[0].strip() if lines else "") or None
+    return os.environ.get("GRASPSCAPE_ZENOH__PASSWORD") or None
 
 
 def _worker(args: argparse.Namespace) -> int:
@@ -11,6 +20,8 @@ def _worker(args: argparse.Namespace) -> int:
     from graspscape.workers.runtime.supervisor import run_worker
 
     options = {
+        "zenoh_user": args.zenoh_user or os.environ.get("GRASPSCAPE_ZENOH__USER") or None,
+        "zenoh_password": _password(args),
         "connect": args.connect or None,
         "procs": args.procs,
         "name": args.name,
@@ -42,6 +53,12 @@ def register_worker(subparsers: argparse._SubParsersAction) -> None:
     worker.add_argument("--tiles-per-request", type=int,
                         help="tiles a process asks for at once (default 1; more only for "
                         "very short tiles, as with --instant)")
+    worker.add_argument("--zenoh-user",
+                        help="zenoh login where the coordinator or router asks for one "
+                        "(default: GRASPSCAPE_ZENOH__USER, else graspscape)")
+    worker.add_argument("--zenoh-password-file", type=Path, metavar="FILE",
+                        help="file whose first line is the zenoh password (default: "
+                        "GRASPSCAPE_ZENOH__PASSWORD; none: no login)")
     worker.add_argument("--log-level", default="info",
                         choices=["critical", "error", "warning", "info", "debug"])
     worker.set_defaults(handler=_worker)

@@ -9,7 +9,7 @@ import secrets
 import socket
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, SerializationInfo, field_serializer
 
 
 def default_procs() -> int:
@@ -45,3 +45,24 @@ class WorkerConfig(BaseModel):
     shutdown_grace_s: float = Field(default=30.0, ge=0)
     # A process that crashed (not one that was told to stop) is started again.
     restart_crashed: bool = True
+    # zenoh usrpwd login, where the coordinator or router asks for one (docs/protocol.md,
+    # "Access control"); no password: no login.
+    zenoh_user: str = Field(default="graspscape", pattern=r"^[^:\s]{1,64}$")
+    zenoh_password: SecretStr | None = None
+
+    @field_serializer("zenoh_password", when_used="json")
+    def _password_for_processes(self, value: SecretStr | None,
+                                info: SerializationInfo) -> str | None:
+        """Written out only for the supervisor's own processes (model_dump_json with
+        context {"secrets": True}); anywhere else it stays masked."""
+        if value is None:
+            return None
+        if info.context and info.context.get("secrets"):
+            return value.get_secret_value()
+        return str(value)
+
+    def zenoh_login(self) -> dict[str, str]:
+        """The `user` and `password` arguments of shared.wire.session.zenoh_config."""
+        if self.zenoh_password is None:
+            return {}
+        return {"user": self.zenoh_user, "password": self.zenoh_password.get_secret_value()}

@@ -95,18 +95,11 @@ class WorkerProcess:
         backoff = Backoff(self.config.backoff_min_s, self.config.backoff_max_s)
         while not self.stop.is_set():
             try:
-                # Bounded connect timeout: the process stays responsive to SIGTERM while the
-                # coordinator is not up yet. Once open, zenoh reconnects by itself.
-                return zenoh.open(
-                    zenoh_config(
-                        mode="client",
-                        connect=self.config.connect,
-                        connect_timeout_ms=2000,
-                        exit_on_failure=True,
-                    )
-                )
+                return zenoh.open(session_config(self.config))
             except zenoh.ZError as exc:
-                log.info("%s: coordinator not reachable yet (%s)", self.worker_id, exc)
+                # zenoh refuses wrong credentials the same way (no other word of it here).
+                log.info("%s: coordinator not reachable yet, or the login refused (%s)",
+                         self.worker_id, exc)
                 self.stop.wait(backoff.next())
         raise Stopped
 
@@ -370,6 +363,14 @@ def _instant_template() -> PoseResult:
 
 _INSTANT = {name: value for name, value in _instant_template() if name not in
             ("pose", "pose_key", "effective_r")}
+
+
+def session_config(config: WorkerConfig) -> zenoh.Config:
+    """A worker process's zenoh session: a client of the coordinator or router, logging in
+    where the config has a password. Bounded connect timeout: the process stays responsive
+    to SIGTERM while the coordinator is not up yet. Once open, zenoh reconnects by itself."""
+    return zenoh_config(mode="client", connect=config.connect, connect_timeout_ms=2000,
+                        exit_on_failure=True, **config.zenoh_login())
 
 
 def _default_cache_dir() -> Path:

@@ -32,7 +32,9 @@ class Supervisor:
     def _start(self, index: int) -> None:
         proc = self.ctx.Process(
             target=process_main,
-            args=(self.config.model_dump_json(), index, self.log_level),
+            # The password too (spawn hands the arguments over a pipe, not the command line).
+            args=(self.config.model_dump_json(context={"secrets": True}), index,
+                  self.log_level),
             name=f"graspscape-worker-{index}",
         )
         proc.start()

@@ -12,7 +12,10 @@ from __future__ import annotations
 import contextlib
 import logging
 import queue
+import shutil
+import tempfile
 import threading
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -41,7 +44,7 @@ from graspscape.shared.wire.messages import (
     ResultBatch,
     TileLease,
 )
-from graspscape.shared.wire.session import zenoh_config
+from graspscape.shared.wire.session import write_users_file, zenoh_config
 from prometheus_client import CollectorRegistry
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -74,6 +77,7 @@ class Dispatcher:
         # back while decoding and replying still overlap. PostgreSQL writes concurrently.
         backend = sessions.kw["bind"].dialect.name if sessions.kw.get("bind") else ""
         self._store_turn = threading.Lock() if backend == "sqlite" else contextlib.nullcontext()
+        self._users_dir: Path | None = None  # the dictionary made from user + password
 
     # -- lifecycle -----------------------------------------------------------------------
 
@@ -86,7 +90,14 @@ class Dispatcher:
 
         A listen endpoint that is taken (another coordinator on this host) must not take the
         REST API down with it: the failure is logged and counted, and retried every few s.
+        Listening beyond loopback without authentication is refused at once (ValueError),
+        unless the settings allow it explicitly.
         """
+        refusal = self.zs.listen_refusal()
+        if refusal is not None:
+            raise ValueError(refusal)
+        if self.zs.users_file is not None and not self.zs.users_file.is_file():
+            raise ValueError(f"zenoh users_file {self.zs.users_file} is not a file")
         try:
             self._open()
         except Exception as exc:
@@ -105,9 +116,23 @@ class Dispatcher:
                 self.counters.errors.labels("session", "open").inc()
                 log.error("zenoh session could not open (%s); retrying", exc)
 
+    def _users_file(self, listen: list[str]) -> Path | None:
+        """The dictionary the embedded peer checks workers against: users_file, or one made
+        of user + password (zenoh reads only files), private to this process."""
+        if not listen or not self.zs.authenticates:
+            return None
+        if self.zs.users_file is not None:
+            return self.zs.users_file
+        assert self.zs.password is not None
+        if self._users_dir is None:
+            self._users_dir = Path(tempfile.mkdtemp(prefix="graspscape-zenoh-"))
+        return write_users_file(self._users_dir / "users",
+                                {self.zs.user: self.zs.password.get_secret_value()})
+
     def _open(self) -> None:
         # A client only connects (to routers); only the embedded peer listens.
         listen = self.zs.listen if self.zs.mode == "peer" else []
+        password = self.zs.password.get_secret_value() if self.zs.password else None
         # A client without its router fails after 5 s and is retried by start(); a peer
         # opens at once and keeps dialling its routers in the background.
         session = zenoh.open(
@@ -117,6 +142,9 @@ class Dispatcher:
                 connect=self.zs.connect,
                 connect_timeout_ms=5000,
                 exit_on_failure=self.zs.mode == "client",
+                user=self.zs.user if password is not None else None,
+                password=password,
+                users_file=self._users_file(listen),
             )
         )
         self._session = session
@@ -140,10 +168,11 @@ class Dispatcher:
         self._threads.append(sweeper)
         freeze_startup_heap()
         log.info(
-            "dispatch up: zenoh %s, listen %s, connect %s",
+            "dispatch up: zenoh %s, listen %s, connect %s, %s",
             self.zs.mode,
             self.zs.listen,
             self.zs.connect,
+            "workers log in (usrpwd)" if self.zs.authenticates else "no authentication",
         )
 
     def stop(self) -> None:
@@ -166,6 +195,9 @@ class Dispatcher:
         if self._session is not None:
             self._session.close()
             self._session = None
+        if self._users_dir is not None:
+            shutil.rmtree(self._users_dir, ignore_errors=True)
+            self._users_dir = None
 
     # -- callbacks: enqueue only -----------------------------------------------------------
 
