@@ -124,6 +124,7 @@ def lease_queries(registry: CollectorRegistry) -> float:
                                      {"kind": "lease", "outcome": "ok"}) or 0.0
 
 
+@pytest.mark.slow
 def test_a_worker_with_the_right_login_gets_work_and_a_wrong_one_never_reaches_it(
     guarded: tuple[Dispatcher, CollectorRegistry], sqlite_sessions: sessionmaker[Session]
 ) -> None:
