@@ -15,7 +15,6 @@ import os
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -47,56 +46,13 @@ from graspscape.workers.sim.placement import place_gripper
 from graspscape.workers.sim.policies import get_policy
 from graspscape.workers.sim.render import render_scene
 from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, run_tests
+from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.signature import build_signature
 from graspscape.workers.sim.trajectory import reference_pose
 from scipy.spatial.transform import Rotation
 
-DRIVE_MAX_FORCE_N = 2000.0
 FIXTURE_MAX_FORCE_N = 5000.0
-CONTACT_DISTANCE_M = 1e-4
-
-
-@dataclass
-class Scene:
-    """The live simulation an evaluation acts on; policies drive it through these methods."""
-
-    client: int
-    hand: Hand
-    object_body: int
-    drive_constraint: int
-    fixture_constraint: int
-    offset: np.ndarray
-    dt: float
-
-    def drive_to(self, position: np.ndarray, rotation: np.ndarray,
-                 max_force: float = DRIVE_MAX_FORCE_N) -> None:
-        p.changeConstraint(self.drive_constraint, jointChildPivot=position.tolist(),
-                           jointChildFrameOrientation=quat_from_matrix(rotation),
-                           maxForce=max_force, physicsClientId=self.client)
-
-    def step(self) -> None:
-        p.stepSimulation(physicsClientId=self.client)
-
-    def in_contact(self) -> bool:
-        return bool(self.contacts())
-
-    def palm_in_contact(self) -> bool:
-        return any(c[3] == -1 for c in self.contacts())
-
-    def touching_links(self) -> frozenset[int]:
-        """Indices of the hand's links that touch the object (the palm is -1)."""
-        return frozenset(c[3] for c in self.contacts())
-
-    def contacts(self) -> list:
-        # pybullet also reports pairs still apart by up to its breaking threshold; only
-        # touching pairs are contacts here.
-        points = p.getContactPoints(self.hand.body, self.object_body, physicsClientId=self.client)
-        return [c for c in points if c[8] <= CONTACT_DISTANCE_M]
-
-    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        pos, orn = p.getBasePositionAndOrientation(self.object_body, physicsClientId=self.client)
-        return np.array(pos), np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
 
 
 class Evaluator:
@@ -277,46 +233,6 @@ class Evaluator:
         finally:
             if grasp is not None:
                 p.removeState(grasp.state, physicsClientId=self.client)
-
-    def restore_grasp(self, grasp: SynthesizedGrasp, *, effort: float | None = None) -> None:
-        """Puts the simulation back where synthesis left it: bodies (through a contact-free
-        state, so no contact cache carries over from what ran before), motor commands (with
-        `effort`, the fingers' forces scaled to that closing effort), drive and fixture
-        constraints, zero gravity and the object's own friction."""
-        scene, cid = self.scene, self.client
-        p.restoreState(self.pristine, physicsClientId=cid)
-        p.performCollisionDetection(physicsClientId=cid)
-        p.restoreState(grasp.state, physicsClientId=cid)
-        scene.hand.commands = dict(grasp.commands)
-        scene.hand.effort = grasp.effort
-        scene.hand.reissue(effort)
-        pivot, orientation, force = grasp.drive
-        p.changeConstraint(scene.drive_constraint, jointChildPivot=pivot,
-                           jointChildFrameOrientation=orientation, maxForce=force,
-                           physicsClientId=cid)
-        pivot, orientation, force = grasp.fixture
-        p.changeConstraint(scene.fixture_constraint, jointChildPivot=pivot,
-                           jointChildFrameOrientation=orientation, maxForce=force,
-                           physicsClientId=cid)
-        p.setGravity(0, 0, 0, physicsClientId=cid)
-        p.changeDynamics(scene.object_body, -1, lateralFriction=grasp.friction,
-                         physicsClientId=cid)
-
-    def holds_along_trajectory(self, grasp: SynthesizedGrasp, *, effort: float | None = None,
-                               friction: float | None = None) -> bool:
-        """Whether the synthesized grasp, restored with the fingers' closing effort `effort`
-        (N·m) and the object's lateral friction `friction`, holds through the release and the
-        reference trajectory (no μs probes). The object's friction is put back afterwards."""
-        self.restore_grasp(grasp, effort=effort)
-        try:
-            if friction is not None:
-                p.changeDynamics(self.scene.object_body, -1, lateralFriction=friction,
-                                 physicsClientId=self.client)
-            held, _, _ = self._run_trajectory(PhaseTimes(), probes=False)
-        finally:
-            p.changeDynamics(self.scene.object_body, -1, lateralFriction=grasp.friction,
-                             physicsClientId=self.client)
-        return held
 
     def robustness(self, pose: Pose, settings: RobustnessSettings | None = None, *,
                    picture: Path | None = None, donors: DonorPool | None = None,

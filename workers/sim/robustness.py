@@ -2,7 +2,7 @@
 
 Every test starts from the *synthesized grasp*: the state right after the policy has closed
 the hand, before the fixture lets the object go (`Evaluator.synthesized` saves it). Each trial
-restores it with `Evaluator.restore_grasp`: bodies through a contact-free state (no contact
+restores it with `restore_grasp`: bodies through a contact-free state (no contact
 cache carries over, so a trial does not depend on what ran before it), the motor commands the
 policy left (pybullet's saved states hold none), the drive and fixture constraints, zero
 gravity and the object's friction. Only the fixture is then released; the hand keeps its joint
@@ -70,7 +70,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
-from graspscape.shared.specs.results import RobustnessReport
+from graspscape.shared.specs.results import PhaseTimes, RobustnessReport
 from graspscape.shared.specs.robustness import RobustnessSettings
 from scipy.spatial.transform import Rotation
 
@@ -150,7 +150,7 @@ def shake_offset(t: float, amplitude_m: float, frequency_hz: float, axis_s: floa
 
 @dataclass(frozen=True)
 class SynthesizedGrasp:
-    """What `Evaluator.restore_grasp` needs to put a synthesized grasp back."""
+    """What `restore_grasp` needs to put a synthesized grasp back."""
 
     state: int  # pybullet saved state (bodies, joints, velocities)
     commands: dict[int, tuple[int, float, float]]  # the hand's motor commands
@@ -191,6 +191,48 @@ def capture_grasp(scene) -> SynthesizedGrasp:
 Exceeded = Callable[[float, float], bool]
 
 
+def restore_grasp(evaluator, grasp: SynthesizedGrasp, *, effort: float | None = None) -> None:
+    """Puts the simulation back where synthesis left it: bodies (through a contact-free
+    state, so no contact cache carries over from what ran before), motor commands (with
+    `effort`, the fingers' forces scaled to that closing effort), drive and fixture
+    constraints, zero gravity and the object's own friction."""
+    scene, cid = evaluator.scene, evaluator.client
+    p.restoreState(evaluator.pristine, physicsClientId=cid)
+    p.performCollisionDetection(physicsClientId=cid)
+    p.restoreState(grasp.state, physicsClientId=cid)
+    scene.hand.commands = dict(grasp.commands)
+    scene.hand.effort = grasp.effort
+    scene.hand.reissue(effort)
+    pivot, orientation, force = grasp.drive
+    p.changeConstraint(scene.drive_constraint, jointChildPivot=pivot,
+                       jointChildFrameOrientation=orientation, maxForce=force,
+                       physicsClientId=cid)
+    pivot, orientation, force = grasp.fixture
+    p.changeConstraint(scene.fixture_constraint, jointChildPivot=pivot,
+                       jointChildFrameOrientation=orientation, maxForce=force,
+                       physicsClientId=cid)
+    p.setGravity(0, 0, 0, physicsClientId=cid)
+    p.changeDynamics(scene.object_body, -1, lateralFriction=grasp.friction,
+                     physicsClientId=cid)
+
+
+def holds_along_trajectory(evaluator, grasp: SynthesizedGrasp, *, effort: float | None = None,
+                       friction: float | None = None) -> bool:
+    """Whether the synthesized grasp, restored with the fingers' closing effort `effort`
+    (N·m) and the object's lateral friction `friction`, holds through the release and the
+    reference trajectory (no μs probes). The object's friction is put back afterwards."""
+    restore_grasp(evaluator, grasp, effort=effort)
+    try:
+        if friction is not None:
+            p.changeDynamics(evaluator.scene.object_body, -1, lateralFriction=friction,
+                             physicsClientId=evaluator.client)
+        held, _, _ = evaluator._run_trajectory(PhaseTimes(), probes=False)
+    finally:
+        p.changeDynamics(evaluator.scene.object_body, -1, lateralFriction=grasp.friction,
+                         physicsClientId=evaluator.client)
+    return held
+
+
 def _hold_still(evaluator, grasp: SynthesizedGrasp, *, gravity: np.ndarray, settle_s: float,
                 steps: int, exceeded: Exceeded,
                 force: Callable[[int], np.ndarray] | None = None,
@@ -201,7 +243,7 @@ def _hold_still(evaluator, grasp: SynthesizedGrasp, *, gravity: np.ndarray, sett
     which `exceeded(distance, angle)` of the object in the hand since the settle (−1 where the
     object touches no link after the settle), or None if it never is."""
     scene, cid, hand = evaluator.scene, evaluator.client, evaluator.scene.hand
-    evaluator.restore_grasp(grasp)
+    restore_grasp(evaluator, grasp)
     p.changeConstraint(scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
     p.setGravity(*gravity.tolist(), physicsClientId=cid)
     hold_pos, hold_rot = hand.frame_pose()
@@ -303,7 +345,7 @@ def shake_test(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings)
 def torque_margin(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings,
                   nominal: bool | None = None) -> float | None:
     """Least closing effort (N·m) at which the synthesized grasp still holds."""
-    return lowest_holding(lambda tau: evaluator.holds_along_trajectory(grasp, effort=tau),
+    return lowest_holding(lambda tau: holds_along_trajectory(evaluator, grasp, effort=tau),
                           settings.torque_lo_fraction * grasp.effort, grasp.effort,
                           settings.margin_trials, hi_holds=nominal)
 
@@ -313,7 +355,7 @@ def friction_margin(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSett
     """Least lateral friction coefficient of the object at which the grasp still holds."""
     hi = grasp.friction
     lo = min(settings.friction_lo, hi)
-    return lowest_holding(lambda mu: evaluator.holds_along_trajectory(grasp, friction=mu),
+    return lowest_holding(lambda mu: holds_along_trajectory(evaluator, grasp, friction=mu),
                           lo, hi, settings.margin_trials, hi_holds=nominal)
 
 
@@ -332,7 +374,7 @@ def run_tests(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings,
 
     nominal = None
     if settings.runs("torque_margin") or settings.runs("friction_margin"):
-        nominal = timed("nominal", lambda: evaluator.holds_along_trajectory(grasp))
+        nominal = timed("nominal", lambda: holds_along_trajectory(evaluator, grasp))
     if settings.runs("torque_margin"):
         tau = timed("torque_margin", lambda: torque_margin(evaluator, grasp, settings, nominal))
         out["torque_margin_nm"] = tau

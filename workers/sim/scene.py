@@ -1,0 +1,57 @@
+"""The live simulation an evaluation acts on: the client, the hand, the object and the two
+constraints (the arm's drive on the hand, the fixture that holds the object until release).
+Policies and the robustness tests drive it through these methods."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+from graspscape.workers.sim.geometry import quat_from_matrix
+from graspscape.workers.sim.gripper.hand import Hand
+
+DRIVE_MAX_FORCE_N = 2000.0
+CONTACT_DISTANCE_M = 1e-4
+
+
+@dataclass
+class Scene:
+    """The live simulation an evaluation acts on; policies drive it through these methods."""
+
+    client: int
+    hand: Hand
+    object_body: int
+    drive_constraint: int
+    fixture_constraint: int
+    offset: np.ndarray
+    dt: float
+
+    def drive_to(self, position: np.ndarray, rotation: np.ndarray,
+                 max_force: float = DRIVE_MAX_FORCE_N) -> None:
+        p.changeConstraint(self.drive_constraint, jointChildPivot=position.tolist(),
+                           jointChildFrameOrientation=quat_from_matrix(rotation),
+                           maxForce=max_force, physicsClientId=self.client)
+
+    def step(self) -> None:
+        p.stepSimulation(physicsClientId=self.client)
+
+    def in_contact(self) -> bool:
+        return bool(self.contacts())
+
+    def palm_in_contact(self) -> bool:
+        return any(c[3] == -1 for c in self.contacts())
+
+    def touching_links(self) -> frozenset[int]:
+        """Indices of the hand's links that touch the object (the palm is -1)."""
+        return frozenset(c[3] for c in self.contacts())
+
+    def contacts(self) -> list:
+        # pybullet also reports pairs still apart by up to its breaking threshold; only
+        # touching pairs are contacts here.
+        points = p.getContactPoints(self.hand.body, self.object_body, physicsClientId=self.client)
+        return [c for c in points if c[8] <= CONTACT_DISTANCE_M]
+
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        pos, orn = p.getBasePositionAndOrientation(self.object_body, physicsClientId=self.client)
+        return np.array(pos), np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
