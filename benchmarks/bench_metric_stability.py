@@ -83,15 +83,21 @@ def weld_figures() -> dict[str, float]:
     return figures
 
 
+def halved(metric: MetricSettings) -> dict[str, MetricSettings]:
+    """The metric settings with instants, window or probe size (linear and angular) halved;
+    the characteristic length is halved by the caller, who knows the object's."""
+    return {
+        "instants": metric.model_copy(update={"instants": max(1, metric.instants // 2)}),
+        "window": metric.model_copy(update={"window_steps": max(1, metric.window_steps // 2)}),
+        "perturbation": metric.model_copy(update={
+            "perturbation_m_s2": metric.perturbation_m_s2 / 2,
+            "angular_perturbation_rad_s2": metric.angular_perturbation_rad_s2 / 2}),
+    }
+
+
 def main() -> None:
     base = MetricSettings()
-    variants = {
-        "instants": base.model_copy(update={"instants": max(1, base.instants // 2)}),
-        "window": base.model_copy(update={"window_steps": max(1, base.window_steps // 2)}),
-        "perturbation": base.model_copy(update={
-            "perturbation_m_s2": base.perturbation_m_s2 / 2,
-            "angular_perturbation_rad_s2": base.angular_perturbation_rad_s2 / 2}),
-    }
+    variants = halved(base)
     reference = np.array(mu_values(base))
     held = reference > 0
     figures: dict[str, float] = {"grasps": float(len(reference)),

@@ -40,8 +40,10 @@ from scipy.stats import spearmanr
 
 try:
     from benchmarks._results import write_results
+    from benchmarks.bench_metric_stability import halved
 except ModuleNotFoundError:
     from _results import write_results
+    from bench_metric_stability import halved
 
 OBJECTS = ["mug", "cube", "can", "ycb:YcbMustardBottle", "ycb:YcbTomatoSoupCan",
            "ycb:YcbTennisBall"]
@@ -115,17 +117,11 @@ def study_object(args: tuple[str, int, int, int, int]) -> dict:
             for row in sample:
                 row[label] = _score(ev.evaluate(row["pose"]))
     metric = base.metric
-    halved = {
-        "instants": metric.model_copy(update={"instants": max(1, metric.instants // 2)}),
-        "window": metric.model_copy(update={"window_steps": max(1, metric.window_steps // 2)}),
-        "perturbation": metric.model_copy(update={
-            "perturbation_m_s2": metric.perturbation_m_s2 / 2,
-            "angular_perturbation_rad_s2": metric.angular_perturbation_rad_s2 / 2}),
-    }
+    variants = halved(metric)
     with _evaluator(name, base) as ev:
         length = ev.length
-    halved["length"] = metric.model_copy(update={"characteristic_length": length / 2})
-    for label, variant in halved.items():
+    variants["length"] = metric.model_copy(update={"characteristic_length": length / 2})
+    for label, variant in variants.items():
         with _evaluator(name, base.model_copy(update={"metric": variant})) as ev:
             for row in sample:
                 row[f"halved_{label}"] = _score(ev.evaluate(row["pose"]))
