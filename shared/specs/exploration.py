@@ -14,7 +14,7 @@ from typing import Literal
 
 from graspscape.shared.specs.gripper import list_grippers
 from graspscape.shared.specs.robustness import RobustnessSettings
-from graspscape.shared.specs.sim import SimSettings
+from graspscape.shared.specs.sim import POLICY_NAMES, SimSettings
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 # Names of grippers and policies are resolved by the workers (configs/grippers, policy
@@ -217,10 +217,7 @@ class ExplorationSpec(BaseModel):
     @field_validator("settings")
     @classmethod
     def _known_policy(cls, settings: SimSettings) -> SimSettings:
-        # The registry lives with the simulation; importing it here costs no physics client.
-        from graspscape.workers.sim.policies import list_policies
-
-        known = list_policies()
+        known = POLICY_NAMES
         if settings.policy_name not in known:
             raise ValueError(
                 f"unknown policy {settings.policy_name!r}; known: {', '.join(known)}")

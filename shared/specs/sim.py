@@ -10,6 +10,10 @@ from graspscape.shared.specs.haptic import HapticPolicySettings
 from graspscape.shared.specs.robustness import RobustnessSettings
 from pydantic import BaseModel, ConfigDict, Field
 
+# The grasp synthesis policies the workers register (workers/sim/policies), named here so a
+# submitted spec is validated without loading the simulation; a test keeps the two equal.
+POLICY_NAMES: tuple[str, ...] = ("baseline", "haptic")
+
 
 class PhysicsSettings(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")

@@ -34,6 +34,10 @@ def haptic_mug(make_evaluator):
 
 def test_haptic_policy_is_registered():
     assert {"baseline", "haptic"} <= set(list_policies())
+    # The coordinator validates specs against shared's list, without the simulation.
+    from graspscape.shared.specs.sim import POLICY_NAMES
+
+    assert sorted(POLICY_NAMES) == list_policies()
 
 
 @pytest.mark.parametrize(("theta", "phi"), [(math.pi / 2, 0.0), (0.0, 0.0), (2.3, 4.0)])
