@@ -2,7 +2,7 @@
 
 Why V-HACD and not CoACD: p.vhacd ships with pybullet (no extra native dependency), works
 without a physics client, takes ~0.6 s for a mug at the resolution below and keeps the mug's
-handle hole (tested in tests/sim/test_objects.py). Results are cached by content hash plus
+handle hole (tested in tests/workers/sim/test_objects.py). Results are cached by content hash plus
 these parameters, so a second load reads a small OBJ instead of recomputing.
 """
 

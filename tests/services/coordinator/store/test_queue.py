@@ -7,11 +7,9 @@ from datetime import timedelta
 
 import pytest
 from graspscape.services.coordinator.errors import NotFound
-from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
-    ObjectRow,
     TileRow,
     WorkerRow,
 )
@@ -21,19 +19,10 @@ from graspscape.services.coordinator.store.queue import (
     renew_lease,
     requeue_expired,
 )
-from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-
-def make_exploration(session: Session, *, dtheta: float = 0.6, target: int = 20) -> int:
-    obj = ObjectRow(kind="named", name="sphere", properties={})
-    session.add(obj)
-    session.commit()
-    spec = ExplorationSpec(
-        object_id=obj.id, gripper="robotiq_3f", grid=PoseGridSpec(dtheta=dtheta, r_max=0.02)
-    )
-    return create_exploration(session, spec=spec, tile_target_poses=target, max_poses=10**6).id
+from tests.factories import make_exploration
 
 
 def tiles(session: Session, exploration_id: int) -> list[TileRow]:

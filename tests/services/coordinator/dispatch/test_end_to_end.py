@@ -13,7 +13,7 @@ from graspscape.services.coordinator.store.models import PoseRow, TileRow
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from tests.dispatch.support import (
+from tests.services.coordinator.dispatch.support import (
     Coordinator,
     Worker,
     assert_complete,

@@ -12,7 +12,7 @@ from graspscape.services.coordinator.manifolds import service
 from graspscape.services.coordinator.store.models import ExplorationRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 
-from tests.exploration.conftest import oracle_result
+from tests.factories import oracle_result
 
 
 @pytest.mark.slow

@@ -17,7 +17,7 @@ from graspscape.services.coordinator.objects.service import create_uploaded
 from graspscape.services.coordinator.store.models import ExplorationRow, ObjectRow, TileRow
 from sqlalchemy import select, update
 
-from tests.dispatch.support import REPO
+from tests.services.coordinator.dispatch.support import REPO
 
 
 def _explore(mesh: Path, data_dir: Path, env: dict[str, str]) -> subprocess.CompletedProcess:

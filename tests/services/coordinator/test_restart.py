@@ -21,9 +21,9 @@ from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.queue import lease_tiles
 from sqlalchemy.orm import Session, sessionmaker
 
-from tests.coordinator.helpers import fake_results
+from tests.factories import fake_results
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _free_port() -> int:

@@ -16,7 +16,7 @@ from graspscape.shared.specs.exploration import PoseGridSpec
 from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 
-from tests.coordinator.helpers import fake_results
+from tests.factories import fake_results
 
 SMALL_GRID = {"dtheta": 0.6, "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
 

@@ -18,7 +18,7 @@ from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from sqlalchemy import delete, select
 
-from tests.exploration.conftest import oracle_result
+from tests.factories import oracle_result
 
 pytestmark = pytest.mark.slow
 

@@ -21,7 +21,7 @@ from graspscape.workers.runtime.process import Stopped, WorkerProcess, session_c
 from prometheus_client import CollectorRegistry
 from sqlalchemy.orm import Session, sessionmaker
 
-from tests.dispatch.support import free_port, submit
+from tests.services.coordinator.dispatch.support import free_port, submit
 
 
 @pytest.mark.parametrize(

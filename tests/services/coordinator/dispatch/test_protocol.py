@@ -35,7 +35,7 @@ from prometheus_client import CollectorRegistry
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from tests.dispatch.support import free_port, submit, wait_for
+from tests.services.coordinator.dispatch.support import free_port, submit, wait_for
 
 
 @pytest.fixture

@@ -50,7 +50,7 @@ def test_get_settings_is_cached() -> None:
 
 
 def test_repository_config_file_is_valid() -> None:
-    repo_config = Path(__file__).resolve().parents[2] / "configs" / "coordinator.toml"
+    repo_config = Path(__file__).resolve().parents[3] / "configs" / "coordinator.toml"
     import tomllib
 
     keys = set(tomllib.loads(repo_config.read_text()))

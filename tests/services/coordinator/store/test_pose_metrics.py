@@ -21,8 +21,7 @@ from graspscape.shared.wire.messages import ResultBatch
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from tests.coordinator.helpers import fake_results
-from tests.coordinator.test_queue import make_exploration
+from tests.factories import fake_results, make_exploration
 
 # Five held poses (by index in the tile): μs, static metrics, and the robustness report.
 HELD: list[tuple[float, tuple[float | None, ...], dict[str, float | None] | None]] = [

@@ -25,7 +25,7 @@ from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, R
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[4]
 
 
 def free_port() -> int:

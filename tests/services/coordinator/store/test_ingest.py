@@ -26,8 +26,7 @@ from graspscape.shared.specs.results import ContactPoint, GraspSignature
 from sqlalchemy import func, select, text
 from sqlalchemy.orm import Session, sessionmaker
 
-from tests.coordinator.helpers import fake_results
-from tests.coordinator.test_queue import make_exploration
+from tests.factories import fake_results, make_exploration
 
 
 def pose_count(session: Session, exploration_id: int) -> int:

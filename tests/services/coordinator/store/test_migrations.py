@@ -51,7 +51,7 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
     from sqlalchemy import text
 
-    from tests.coordinator.helpers import fake_results
+    from tests.factories import fake_results
 
     url = f"sqlite:///{tmp_path / 'old.db'}"
     db.upgrade(url, "0005")

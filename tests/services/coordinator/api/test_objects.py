@@ -9,7 +9,7 @@ import trimesh
 from fastapi.testclient import TestClient
 from graspscape.services.coordinator.settings import Settings
 
-from tests.coordinator.conftest import box_stl
+from tests.factories import box_stl
 
 TETRA_OBJ = b"v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 

@@ -1,0 +1,111 @@
+"""Factories of test data: realistic worker results, an oracle standing in for pybullet where a
+test is about the store's decisions rather than physics, meshes and explorations."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import trimesh
+from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.store.models import ObjectRow
+from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import (
+    ContactPoint,
+    GraspConfiguration,
+    GraspSignature,
+    Outcome,
+    PhaseTimes,
+    PoseResult,
+)
+from sqlalchemy.orm import Session
+
+LINKS = ("palm", "finger_1_prox", "finger_1_dist", "finger_2_prox", "finger_2_dist", "thumb")
+
+
+def fake_result(pose: Pose, rng: random.Random) -> PoseResult:
+    """A plausible evaluation of one pose (random outcome, contacts, joint angles)."""
+    outcome = rng.choice(list(Outcome))
+    grasped = outcome in (Outcome.HELD, Outcome.DROPPED)
+    links = tuple(sorted(rng.sample(LINKS, rng.randint(2, 4)))) if grasped else ()
+    joints = {f"j{i}": rng.uniform(0.0, 1.5) for i in range(8)}
+    return PoseResult(
+        pose=pose,
+        pose_key=pose.key(),
+        outcome=outcome,
+        viable=outcome == Outcome.HELD,
+        mu_s=rng.random() if outcome == Outcome.HELD else 0.0,
+        effective_r=pose.r,
+        effort_max_nm=rng.uniform(0.0, 3.0),
+        contacts_per_link={link: rng.randint(1, 3) for link in links},
+        grasp=GraspConfiguration(
+            base_position=(rng.random(), rng.random(), rng.random()),
+            base_orientation=(0.0, 0.0, 0.0, 1.0),
+            joint_angles=joints,
+        )
+        if grasped
+        else None,
+        signature=GraspSignature(
+            links_in_contact=links,
+            contacts=tuple(
+                ContactPoint(
+                    link=link,
+                    position_object=(rng.random(), 0.0, 0.01),
+                    normal_force_n=rng.uniform(0, 20),
+                )
+                for link in links
+            ),
+            joint_angles=joints,
+        )
+        if grasped
+        else None,
+        eval_time_s=rng.uniform(0.2, 2.0),
+        phases=PhaseTimes(approach_s=0.1, closing_s=0.2, trajectory_s=0.5),
+    )
+
+
+def fake_results(poses: list[Pose], seed: int = 0) -> list[PoseResult]:
+    rng = random.Random(seed)
+    return [fake_result(p, rng) for p in poses]
+
+
+def oracle_result(pose: Pose) -> PoseResult:
+    """Two grasp types split at φ = π, nothing held below θ = 2.2 rad or far out on one side."""
+    held = pose.theta < 2.2 and not (pose.r > 0.012 and 0.5 < pose.phi < 1.5)
+    if not held:
+        return PoseResult(pose=pose, pose_key=pose.key(), outcome=Outcome.NO_GRASP,
+                          viable=False, mu_s=0.0)
+    angle = 0.2 if pose.phi < math.pi else 1.0
+    joints = {f"{d}_{i}": angle for d in "ABC" for i in (1, 2, 3)}
+    u = (math.sin(pose.theta) * math.cos(pose.phi), math.sin(pose.theta) * math.sin(pose.phi),
+         math.cos(pose.theta))
+    contacts = tuple(
+        ContactPoint(link=f"{d}_3", position_object=tuple(0.04 * c for c in u),
+                     normal_force_n=1.0)
+        for d in "ABC"
+    )
+    return PoseResult(
+        pose=pose, pose_key=pose.key(), outcome=Outcome.HELD, viable=True,
+        mu_s=round(0.5 + 0.3 * math.cos(pose.theta) * math.sin(pose.phi), 9),
+        effort_max_nm=1.0 + pose.theta,
+        grasp=GraspConfiguration(base_position=tuple(0.06 * c for c in u),
+                                 base_orientation=(0.0, 0.0, 0.0, 1.0), joint_angles=joints),
+        signature=GraspSignature(links_in_contact=tuple(f"{d}_3" for d in "ABC"),
+                                 contacts=contacts, joint_angles=joints),
+    )
+
+
+def box_stl(extents: tuple[float, float, float] = (0.05, 0.05, 0.1)) -> bytes:
+    return trimesh.creation.box(extents=extents).export(file_type="stl")
+
+
+def make_exploration(session: Session, *, dtheta: float = 0.6, target: int = 20) -> int:
+    """A sphere exploration with its coarse tiles queued."""
+    obj = ObjectRow(kind="named", name="sphere", properties={})
+    session.add(obj)
+    session.commit()
+    spec = ExplorationSpec(
+        object_id=obj.id, gripper="robotiq_3f", grid=PoseGridSpec(dtheta=dtheta, r_max=0.02)
+    )
+    return create_exploration(session, spec=spec, tile_target_poses=target, max_poses=10**6).id
