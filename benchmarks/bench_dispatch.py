@@ -64,7 +64,7 @@ def _free_port() -> int:
 def _serve(url: str, data_dir: Path, endpoint: str) -> subprocess.Popen:
     port = _free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "graspscape.shared.cli", "serve", "--database-url", url,
+        [sys.executable, "-m", "graspscape.services.local.cli", "serve", "--database-url", url,
          "--port", str(port), "--no-migrate", "--log-level", "warning",
          "--zenoh-listen", endpoint],
         cwd=REPO, env={**os.environ, "GRASPSCAPE_DATA_DIR": str(data_dir)},
@@ -82,7 +82,7 @@ def _serve(url: str, data_dir: Path, endpoint: str) -> subprocess.Popen:
 
 
 def _worker(endpoint: str, procs: int, cache: Path, instant: bool) -> subprocess.Popen:
-    args = [sys.executable, "-m", "graspscape.shared.cli", "worker", "--connect", endpoint,
+    args = [sys.executable, "-m", "graspscape.services.local.cli", "worker", "--connect", endpoint,
             "--procs", str(procs), "--cache-dir", str(cache), "--log-level", "warning"]
     if instant:
         # Instant tiles are short: asking for a few at once saves lease round trips.

@@ -38,13 +38,13 @@ from pathlib import Path
 import numpy as np
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.exploration.lattice import Lattice
-from graspscape.services.coordinator.exploration.local_run import pybullet_evaluator, run_local
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.behaviour import Sample
 from graspscape.services.coordinator.manifolds.service import compute_map
 from graspscape.services.coordinator.manifolds.summary import build_map
 from graspscape.services.coordinator.objects.service import create_named
 from graspscape.services.coordinator.store.models import PoseRow
+from graspscape.services.local.run import pybullet_evaluator, run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.results import PoseResult
@@ -71,10 +71,12 @@ def azimuth_multiple_of(name: str) -> int:
     """The lattice's azimuth multiple that the symmetry shortcut gives this object; every
     variant, and the dense grid, use it, so that all of them share one lattice."""
     from graspscape.services.coordinator.exploration import symmetry
-    from graspscape.services.coordinator.manifolds.service import _mesh_for
+    from graspscape.services.coordinator.objects.geometry import spec_mesh
+    from graspscape.services.local.compose import wire
     from graspscape.shared.specs.gripper import load_gripper
 
-    mesh = _mesh_for(ObjectSpec(name=name).model_dump_json())
+    wire()  # the coordinator sees the object as the workers prepare it
+    mesh = spec_mesh(ObjectSpec(name=name))
     usable = symmetry.task_symmetries(symmetry.detect(mesh), load_gripper("robotiq_3f"))
     return symmetry.azimuth_multiple(usable)
 
@@ -331,7 +333,8 @@ def main() -> None:
                         help="where the dense pass is kept between runs")
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
-    from graspscape.services.coordinator.manifolds.service import _mesh_for, radius_function
+    from graspscape.services.coordinator.manifolds.service import radius_function
+    from graspscape.services.coordinator.objects.geometry import spec_mesh
 
     figures: dict[str, float] = {}
     table: list[dict] = []
@@ -356,7 +359,7 @@ def main() -> None:
             dense, dense_wall = dense_results(name, pool, args.cache, top, multiple, levels)
             if dense_wall > 0.0:  # 0: kept from a run at more rolls; its time stays
                 dense_walls[name] = round(dense_wall, 1)
-            radius = radius_function(_mesh_for(ObjectSpec(name=name).model_dump_json()))
+            radius = radius_function(spec_mesh(ObjectSpec(name=name)))
             lattice1 = Lattice(_spec(1, 1, multiple, levels=levels).grid, levels)
             samples1 = {p: Sample.from_row(_Row(dense[lattice1.pose(p).key()]))
                         for p in _fine_points(lattice1)}

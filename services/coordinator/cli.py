@@ -1,4 +1,4 @@
-"""`graspscape serve`, `explore` and `db upgrade|current`: the coordinator's subcommands.
+"""`graspscape serve` and `db upgrade|current`: the coordinator's subcommands.
 
 Imports of FastAPI, uvicorn and Alembic stay inside the handlers so `graspscape --help` is
 instant.
@@ -7,7 +7,6 @@ instant.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 
 def _settings(args: argparse.Namespace):  # -> Settings
@@ -57,29 +56,6 @@ def _serve(args: argparse.Namespace) -> int:
         create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level
     )
     return 0
-
-
-def _explore(args: argparse.Namespace) -> int:
-    from graspscape.services.coordinator.dispatch.explore import ExploreOptions, run_explore
-
-    options = {
-        "object": args.object,
-        "gripper": args.gripper,
-        "dtheta_deg": args.dtheta,
-        "r_min": args.r_min,
-        "r_max": args.r_max,
-        "dr": args.dr,
-        "rolls": args.rolls,
-        "levels": args.levels,
-        "procs": args.procs,
-        "data_dir": args.data_dir,
-        "mass_kg": args.mass,
-        "friction": args.friction,
-        "robustness": None if args.robustness is None else tuple(
-            t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
-        "quiet": args.quiet,
-    }
-    return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
 
 
 def _db_upgrade(args: argparse.Namespace) -> int:
@@ -156,50 +132,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="listen beyond loopback without authentication (refused otherwise)",
     )
     serve.set_defaults(handler=_serve)
-
-    from graspscape.services.coordinator.dispatch.explore_defaults import (
-        DEFAULT_DTHETA_DEG,
-        DEFAULT_R,
-    )
-
-    explore = subparsers.add_parser(
-        "explore",
-        help="explore an object on this machine: coordinator (SQLite) + local workers",
-        epilog="The last line says how the exploration ended; exit status 0 done (every pose "
-        "stored), 2 incomplete (tiles failed, some poses stored), 1 failed (no pose stored) or "
-        "cancelled, 130 interrupted. The same command again resumes an unfinished exploration "
-        "and queues its failed tiles again.",
-    )
-    explore.add_argument(
-        "object", help="built-in name (sphere, cube, mug, ...), pb:<name>, ycb:<Folder> or a "
-        "mesh file"
-    )
-    explore.add_argument("--gripper", help="gripper spec name (default robotiq_3f)")
-    explore.add_argument(
-        "--dtheta",
-        type=float,
-        help=f"angle between approach directions, degrees (default {DEFAULT_DTHETA_DEG:g})",
-    )
-    explore.add_argument("--r-min", type=float, help=f"smallest start gap, m ({DEFAULT_R[0]})")
-    explore.add_argument("--r-max", type=float, help=f"largest start gap, m ({DEFAULT_R[1]})")
-    explore.add_argument("--dr", type=float, help=f"start gap step, m ({DEFAULT_R[2]})")
-    explore.add_argument("--rolls", type=int, choices=[1, 2, 4, 8], help="rolls per point (1)")
-    explore.add_argument("--levels", type=int, choices=range(7), metavar="{0..6}",
-                         help="border refinement levels (1): halvings of the grid where "
-                         "neighbouring poses differ")
-    explore.add_argument("--procs", type=int, help="worker processes (default: cores)")
-    explore.add_argument(
-        "--data-dir", type=Path, help="folder of the database and results (default data)"
-    )
-    explore.add_argument("--mass", type=float, help="object mass, kg")
-    explore.add_argument("--friction", type=float, help="object friction coefficient")
-    explore.add_argument(
-        "--robustness", metavar="TESTS",
-        help="robustness tests run on every held pose, comma-separated "
-        "(torque_margin, friction_margin, gravity, force, tug, shake), or 'none'; "
-        "default: the exploration spec's")
-    explore.add_argument("--quiet", action="store_true", help="no progress bar")
-    explore.set_defaults(handler=_explore)
 
     database = subparsers.add_parser("db", help="coordinator database schema")
     actions = database.add_subparsers(dest="db_command", required=True, metavar="ACTION")

@@ -4,17 +4,15 @@
 with what `summary.build_map` computes from every stored pose; it runs as results arrive
 (throttled geometrically: `maybe_refresh`) and once more, final, when the exploration completes. The
 object mesh is needed only for volumes (surface radius along each approach direction); it is
-prepared once per process and object.
+prepared once per process and object (`objects.geometry`).
 """
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 from dataclasses import dataclass
 from enum import StrEnum
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -32,15 +30,14 @@ from graspscape.services.coordinator.manifolds.summary import (
     ManifoldSummary,
     build_map,
 )
+from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
     ExplorationRow,
     ManifoldRow,
-    ObjectRow,
     PoseRow,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
-from graspscape.shared.specs.objects import ObjectSpec
 from sqlalchemy import bindparam, delete, select, update
 from sqlalchemy.orm import Session
 
@@ -54,41 +51,6 @@ REFRESH_EVERY_TILES = 10  # the first incremental refresh: at the 10th finished 
 REFRESH_GROWTH = 0.25
 FALLBACK_RADIUS_M = FALLBACK_RADIUS
 _KEY_CHUNK = 500
-
-
-def object_spec(row: ObjectRow, cache_dir: Path) -> ObjectSpec:
-    props = dict(row.properties or {})
-    if row.mesh is not None and row.content_hash:
-        path = cache_dir / "coordinator-meshes" / f"{row.content_hash}.{row.mesh_format}"
-        if not path.is_file():
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(row.mesh)
-        return ObjectSpec(mesh_path=str(path), **props)
-    return ObjectSpec(name=row.name, **props)
-
-
-@functools.lru_cache(maxsize=16)
-def _mesh_for(spec_json: str) -> Any:
-    from graspscape.workers.sim.evaluate import default_cache_dir
-    from graspscape.workers.sim.objects import prepare_object
-
-    spec = ObjectSpec.model_validate_json(spec_json)
-    return prepare_object(spec, default_cache_dir() / "objects").mesh
-
-
-def object_mesh(session: Session, object_id: int) -> Any | None:
-    """The object's mesh in its centre-of-mass frame, or None where it cannot be prepared."""
-    from graspscape.workers.sim.evaluate import default_cache_dir
-
-    row = session.get(ObjectRow, object_id)
-    if row is None:
-        return None
-    try:
-        return _mesh_for(object_spec(row, default_cache_dir()).model_dump_json())
-    except Exception:  # volumes fall back to a fixed radius; the map itself does not need it
-        log.exception("object %s: mesh unavailable, volumes use a %.2f m radius",
-                      object_id, FALLBACK_RADIUS_M)
-        return None
 
 
 def radius_function(mesh: Any | None) -> Any:

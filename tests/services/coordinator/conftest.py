@@ -1,5 +1,6 @@
 """Fixtures of the coordinator tests: its settings on each database backend, the app under a
-test client, and objects to explore."""
+test client, and objects to explore. The coordinator sees objects through the workers'
+preparation, as every `graspscape` command composes it (graspscape.services.local)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,13 @@ from graspscape.services.coordinator.app import create_app
 from graspscape.services.coordinator.objects.service import create_named
 from graspscape.services.coordinator.settings import Settings
 from sqlalchemy.orm import Session, sessionmaker
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _composed() -> None:
+    from graspscape.services.local.compose import wire
+
+    wire()
 
 
 @pytest.fixture

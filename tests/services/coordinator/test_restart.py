@@ -44,7 +44,7 @@ class Coordinator:
             [
                 sys.executable,
                 "-m",
-                "graspscape.shared.cli",
+                "graspscape.services.local.cli",
                 "serve",
                 "--database-url",
                 db_url,

@@ -239,7 +239,7 @@ def test_tests_repeat_exactly_whatever_ran_before(own_evaluator):
 def test_eval_pose_command_prints_the_report(sim_cache, monkeypatch, capsys):
     # `--robustness` alone runs every test; a choice keeps this test quick.
     import graspscape.workers.sim.evaluate as evaluate_module
-    from graspscape.shared.cli import build_parser, main
+    from graspscape.services.local.cli import build_parser, main
 
     assert build_parser().parse_args(
         ["eval-pose", "--theta", "0", "--phi", "0", "--robustness"]).robustness == "all"

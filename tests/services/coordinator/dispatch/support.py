@@ -60,7 +60,7 @@ class Coordinator:
         env.pop("GRASPSCAPE_API_TOKEN", None)
         self.log = open(self.data_dir / f"coordinator-{self.port}.log", "wb")  # noqa: SIM115
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "graspscape.shared.cli", "serve", "--database-url",
+            [sys.executable, "-m", "graspscape.services.local.cli", "serve", "--database-url",
              self.db_url, "--port", str(self.port), "--no-migrate", "--log-level", "warning",
              "--zenoh-listen", self.endpoint],
             cwd=REPO, env=env, stdout=self.log, stderr=subprocess.STDOUT,
@@ -105,7 +105,8 @@ class Worker:
                  log_level: str = "info") -> None:
         self.log_path = cache_dir.parent / f"worker-{name}.log"
         self.log = open(self.log_path, "wb")  # noqa: SIM115
-        args = [sys.executable, "-m", "graspscape.shared.cli", "worker", "--connect", endpoint,
+        args = [sys.executable, "-m", "graspscape.services.local.cli", "worker", "--connect",
+                endpoint,
                 "--procs", str(procs), "--name", name, "--cache-dir", str(cache_dir),
                 "--log-level", log_level]
         if instant:

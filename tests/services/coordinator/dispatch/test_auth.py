@@ -80,7 +80,7 @@ def test_serve_refuses_to_listen_beyond_loopback_without_a_login(
     sqlite_url: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     import uvicorn
-    from graspscape.shared.cli import main
+    from graspscape.services.local.cli import main
 
     served: list[object] = []
     monkeypatch.setattr(uvicorn, "run", lambda app, **kwargs: served.append(app))
@@ -183,7 +183,7 @@ def test_the_worker_command_takes_its_login_from_a_file_or_the_environment(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     import graspscape.workers.runtime.supervisor as supervisor
-    from graspscape.shared.cli import main
+    from graspscape.services.local.cli import main
 
     configs: list[WorkerConfig] = []
     monkeypatch.setattr(supervisor, "run_worker",

@@ -15,7 +15,7 @@ import pytest
 
 @pytest.mark.slow
 def test_explore_maps_an_object_on_this_machine(tmp_path: Path):
-    command = [sys.executable, "-m", "graspscape.shared.cli", "explore", "sphere",
+    command = [sys.executable, "-m", "graspscape.services.local.cli", "explore", "sphere",
                "--dtheta", "60", "--r-min", "0.02", "--r-max", "0.02", "--levels", "0",
                "--procs", "1", "--data-dir", str(tmp_path), "--quiet"]
     run = subprocess.run(command, capture_output=True, text=True, timeout=240)

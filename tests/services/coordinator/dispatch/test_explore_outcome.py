@@ -21,7 +21,7 @@ from tests.services.coordinator.dispatch.support import REPO
 
 
 def _explore(mesh: Path, data_dir: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
-    command = [sys.executable, "-m", "graspscape.shared.cli", "explore", str(mesh),
+    command = [sys.executable, "-m", "graspscape.services.local.cli", "explore", str(mesh),
                "--mass", "0.2", "--dtheta", "60", "--r-min", "0.02", "--r-max", "0.02",
                "--levels", "0", "--procs", "1", "--data-dir", str(data_dir), "--quiet"]
     return subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=REPO,

@@ -11,10 +11,10 @@ from collections import Counter
 
 import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice
-from graspscape.services.coordinator.exploration.local_run import run_local
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.service import ensure_manifolds, stored_manifolds
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
+from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
 from sqlalchemy import delete, select
 

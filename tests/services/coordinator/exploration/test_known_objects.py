@@ -15,11 +15,11 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pyarrow.parquet as pq
 import pytest
-from graspscape.services.coordinator.exploration.local_run import pybullet_evaluator, run_local
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.behaviour import same_behaviour
 from graspscape.services.coordinator.manifolds.service import compute_map
 from graspscape.services.coordinator.store.models import PoseRow
+from graspscape.services.local.run import pybullet_evaluator, run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
 from PIL import Image

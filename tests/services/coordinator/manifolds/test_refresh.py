@@ -6,10 +6,10 @@ import itertools
 import math
 
 import pytest
-from graspscape.services.coordinator.exploration.local_run import run_local
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds import service
 from graspscape.services.coordinator.store.models import ExplorationRow
+from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
 
 from tests.factories import oracle_result

@@ -1,6 +1,7 @@
 """Run an exploration in-process: lease, evaluate with pybullet, ingest — no network.
 
-For tests, benchmarks and the CLI on one machine. `workers` simulated workers lease one tile
+For tests, benchmarks and `graspscape map run` on one machine, composed as `explore` is
+(`compose.wire`). `workers` simulated workers lease one tile
 each per round; their reports are ingested in an order drawn from `seed`, and each tile's
 results may arrive in several partial batches, so that one spec can be driven through many
 interleavings (what different numbers of real workers would produce). Evaluations go through
@@ -20,6 +21,7 @@ from graspscape.services.coordinator.dispatch.catalog import configuration_match
 from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.models import ExplorationRow
 from graspscape.services.coordinator.store.queue import lease_tiles
+from graspscape.services.local.compose import wire
 from graspscape.shared.specs.exploration import ConfigurationMatch, ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
@@ -111,6 +113,7 @@ def run_local(
 ) -> RunStats:
     """Drive every queued tile to done. `split` > 1 sends each tile's results in that many
     batches (the last one final); batches of all leased tiles are shuffled by `seed`."""
+    wire()
     rng = random.Random(seed)
     stats = RunStats()
     started = time.perf_counter()

@@ -18,12 +18,6 @@ import sys
 import time
 from pathlib import Path
 
-from graspscape.services.coordinator import db
-from graspscape.services.coordinator.dispatch.explore_defaults import (
-    DEFAULT_DTHETA_DEG,
-    DEFAULT_LEVELS,
-    DEFAULT_R,
-)
 from graspscape.services.coordinator.dispatch.leases import requeue_lost
 from graspscape.services.coordinator.dispatch.service import Dispatcher
 from graspscape.services.coordinator.exploration.adaptive import resolve_grid
@@ -32,7 +26,6 @@ from graspscape.services.coordinator.exploration.service import (
     failure_summary,
 )
 from graspscape.services.coordinator.maps.picture import write_map_files
-from graspscape.services.coordinator.objects.service import create_named, create_uploaded
 from graspscape.services.coordinator.settings import Settings, ZenohSettings
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -44,13 +37,15 @@ from graspscape.services.coordinator.store.models import (
     TileState,
 )
 from graspscape.services.coordinator.store.queue import retry_failed_tiles
+from graspscape.services.local.compose import open_store, store_object, wire
+from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_LEVELS, DEFAULT_R
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
 from graspscape.shared.specs.robustness import TestName
 from graspscape.workers.runtime.config import WorkerConfig, default_procs
 from graspscape.workers.runtime.supervisor import Supervisor
 from pydantic import BaseModel, Field
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.orm import Session
 
 
 class ExploreOptions(BaseModel):
@@ -75,18 +70,6 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def _object_id(session: Session, opts: ExploreOptions) -> int:
-    props = {k: v for k, v in {"mass_kg": opts.mass_kg, "friction": opts.friction}.items()
-             if v is not None}
-    path = Path(opts.object)
-    if path.suffix and path.is_file():
-        row, _ = create_uploaded(session, filename=path.name, data=path.read_bytes(),
-                                 properties=props)
-    else:
-        row, _ = create_named(session, name=opts.object, properties=props, shared_dir=None)
-    return row.id
 
 
 # Exit statuses of `graspscape explore`.
@@ -181,10 +164,8 @@ def run_explore(opts: ExploreOptions) -> int:
         database_url=f"sqlite:///{(data_dir / 'coordinator.db').as_posix()}",
         zenoh=ZenohSettings(enabled=True, mode="peer", listen=[endpoint], connect=[]),
     )
-    url = settings.resolved_database_url
-    db.upgrade(url)
-    engine = db.make_engine(url)
-    sessions: sessionmaker[Session] = db.make_sessionmaker(engine)
+    wire()
+    engine, sessions = open_store(settings.resolved_database_url)
     spec = ExplorationSpec(
         object_id=1,  # replaced below, once the object is stored
         gripper=opts.gripper,
@@ -198,7 +179,9 @@ def run_explore(opts: ExploreOptions) -> int:
         spec = spec.model_copy(update={"settings": sim.model_copy(update={
             "robustness": sim.robustness.model_copy(update={"tests": opts.robustness})})})
     with sessions() as session:
-        spec = spec.model_copy(update={"object_id": _object_id(session, opts)})
+        object_id = store_object(session, opts.object, mass_kg=opts.mass_kg,
+                                 friction=opts.friction)
+        spec = spec.model_copy(update={"object_id": object_id})
         exploration_id, resumed, retried = _exploration(session, spec, settings)
         # Every worker of this command starts now, so any lease still held is an orphan of
         # an earlier, interrupted run.

@@ -1,0 +1,119 @@
+"""The one `graspscape` command: composes the subcommands of both sides.
+
+Each side registers its own (`register(subparsers)`): the workers' (`worker`, `eval-pose`, …),
+the coordinator's (`serve`, `db`, `map show|export`); this composing package adds those that
+run both on one machine (`explore`, `map run`). Every command runs with the coordinator wired to
+the workers' object preparation (`compose.wire`). Heavy imports (pybullet, FastAPI) stay inside
+the handlers so that `graspscape --help` stays instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_R
+
+
+def _explore(args: argparse.Namespace) -> int:
+    from graspscape.services.local.explore import ExploreOptions, run_explore
+
+    options = {
+        "object": args.object,
+        "gripper": args.gripper,
+        "dtheta_deg": args.dtheta,
+        "r_min": args.r_min,
+        "r_max": args.r_max,
+        "dr": args.dr,
+        "rolls": args.rolls,
+        "levels": args.levels,
+        "procs": args.procs,
+        "data_dir": args.data_dir,
+        "mass_kg": args.mass,
+        "friction": args.friction,
+        "robustness": None if args.robustness is None else tuple(
+            t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
+        "quiet": args.quiet,
+    }
+    return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
+
+
+def _register_explore(subparsers: argparse._SubParsersAction) -> None:
+    explore = subparsers.add_parser(
+        "explore",
+        help="explore an object on this machine: coordinator (SQLite) + local workers",
+        epilog="The last line says how the exploration ended; exit status 0 done (every pose "
+        "stored), 2 incomplete (tiles failed, some poses stored), 1 failed (no pose stored) or "
+        "cancelled, 130 interrupted. The same command again resumes an unfinished exploration "
+        "and queues its failed tiles again.",
+    )
+    explore.add_argument(
+        "object", help="built-in name (sphere, cube, mug, ...), pb:<name>, ycb:<Folder> or a "
+        "mesh file"
+    )
+    explore.add_argument("--gripper", help="gripper spec name (default robotiq_3f)")
+    explore.add_argument(
+        "--dtheta",
+        type=float,
+        help=f"angle between approach directions, degrees (default {DEFAULT_DTHETA_DEG:g})",
+    )
+    explore.add_argument("--r-min", type=float, help=f"smallest start gap, m ({DEFAULT_R[0]})")
+    explore.add_argument("--r-max", type=float, help=f"largest start gap, m ({DEFAULT_R[1]})")
+    explore.add_argument("--dr", type=float, help=f"start gap step, m ({DEFAULT_R[2]})")
+    explore.add_argument("--rolls", type=int, choices=[1, 2, 4, 8], help="rolls per point (1)")
+    explore.add_argument("--levels", type=int, choices=range(7), metavar="{0..6}",
+                         help="border refinement levels (1): halvings of the grid where "
+                         "neighbouring poses differ")
+    explore.add_argument("--procs", type=int, help="worker processes (default: cores)")
+    explore.add_argument(
+        "--data-dir", type=Path, help="folder of the database and results (default data)"
+    )
+    explore.add_argument("--mass", type=float, help="object mass, kg")
+    explore.add_argument("--friction", type=float, help="object friction coefficient")
+    explore.add_argument(
+        "--robustness", metavar="TESTS",
+        help="robustness tests run on every held pose, comma-separated "
+        "(torque_margin, friction_margin, gravity, force, tug, shake), or 'none'; "
+        "default: the exploration spec's")
+    explore.add_argument("--quiet", action="store_true", help="no progress bar")
+    explore.set_defaults(handler=_explore)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from graspscape.services.coordinator import cli as coordinator_cli
+    from graspscape.services.coordinator.maps import cli as maps_cli
+    from graspscape.services.local.map_run import register_run
+    from graspscape.workers import cli as workers_cli
+
+    parser = argparse.ArgumentParser(
+        prog="graspscape",
+        description="Map the behavioral manifolds of an object for a gripper.",
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    workers_cli.register(subparsers)
+    coordinator_cli.register(subparsers)
+    _register_explore(subparsers)
+    register_run(maps_cli.register(subparsers))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        from graspscape.services.local.compose import wire
+
+        wire()
+        return int(args.handler(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:  # one clear line for users instead of a traceback
+        if getattr(args, "debug", False):
+            raise
+        print(f"graspscape {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
