@@ -41,6 +41,7 @@ from graspscape.shared.wire.session import zenoh_config
 from graspscape.workers.runtime.backoff import Backoff
 from graspscape.workers.runtime.config import WorkerConfig
 from graspscape.workers.runtime.objects import ObjectCache, ObjectFetchError
+from graspscape.workers.runtime.watch import CoordinatorWatch, stop_with_parent
 
 log = logging.getLogger("graspscape.worker")
 
@@ -61,6 +62,7 @@ class WorkerProcess:
         # The batch sent last, whose acknowledgement is not read yet: the next tile is
         # evaluated meanwhile (see _send).
         self.pending: _Delivery | None = None
+        self.watch: CoordinatorWatch | None = None
 
     # -- lifecycle -----------------------------------------------------------------------
 
@@ -72,6 +74,7 @@ class WorkerProcess:
     def run(self) -> None:
         signal.signal(signal.SIGTERM, self.request_stop)
         signal.signal(signal.SIGINT, self.request_stop)
+        stop_with_parent(self.request_stop)
         try:
             self.session = self._open()
         except Stopped:
@@ -103,12 +106,19 @@ class WorkerProcess:
                 self.stop.wait(backoff.next())
         raise Stopped
 
+    def _check_link(self) -> None:
+        """Log where the coordinator went (called while waiting for it)."""
+        if self.watch is None:
+            self.watch = CoordinatorWatch(self.session, self.worker_id, self.config.connect)
+        self.watch.check()
+
     def _loop(self) -> None:
         idle = Backoff(self.config.backoff_min_s, self.config.backoff_max_s)
         while not self.stop.is_set():
             tiles = self._lease()
             if not tiles:
                 self._settle()
+                self._check_link()
                 self.stop.wait(idle.next())  # no work, or no coordinator: ask again later
                 continue
             idle.reset()
@@ -316,6 +326,7 @@ class WorkerProcess:
             except zenoh.ZError as exc:
                 log.warning("%s: sending tile %d failed: %s", self.worker_id, batch.tile_id, exc)
             # No answer (coordinator down or restarting) or a retryable refusal.
+            self._check_link()
             if self.stop_deadline is not None and time.monotonic() > self.stop_deadline:
                 log.error("%s: gave up delivering tile %d at shutdown; it will be queued "
                           "again by the coordinator", self.worker_id, batch.tile_id)
