@@ -14,6 +14,7 @@ class Outcome(StrEnum):
     NO_GRASP = "no_grasp"  # the hand closed but the object was not enclosed
     NO_CONTACT = "no_contact"  # the approach never touched the object
     INFEASIBLE = "infeasible"  # the start pose could not be placed without interpenetration
+    ERROR = "error"  # the evaluation of this pose raised; PoseResult.error says what
 
 
 class ContactPoint(BaseModel):
@@ -115,3 +116,6 @@ class PoseResult(BaseModel):
         default=None, ge=0.0, description="least closing torque that still holds, N·m")
     robustness: RobustnessReport | None = Field(
         default=None, description="margins and grasp tests (Evaluator.robustness only)")
+    error: str | None = Field(
+        default=None, max_length=2000,
+        description="outcome `error` only: the exception the evaluation of this pose raised")

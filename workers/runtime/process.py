@@ -22,10 +22,6 @@ import zenoh
 from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
-    ContactPoint,
-    GraspConfiguration,
-    GraspSignature,
-    Outcome,
     PoseResult,
 )
 from graspscape.shared.wire import keys
@@ -40,6 +36,8 @@ from graspscape.shared.wire.messages import (
 from graspscape.shared.wire.session import zenoh_config
 from graspscape.workers.runtime.backoff import Backoff
 from graspscape.workers.runtime.config import WorkerConfig
+from graspscape.workers.runtime.instant import instant_result
+from graspscape.workers.runtime.isolation import ErrorStreak, error_result
 from graspscape.workers.runtime.objects import ObjectCache, ObjectFetchError
 from graspscape.workers.runtime.watch import CoordinatorWatch, stop_with_parent
 
@@ -188,18 +186,26 @@ class WorkerProcess:
             self.stop.wait(self.config.backoff_max_s)
             return None
         donors = self._donors(tile)
-        try:
-            for pose in poses:
-                if self.stop.is_set():
-                    break
-                results.append(self._evaluate(tile, obj, pose, donors))
-                log.debug("%s: tile %d: pose %d of %d evaluated", self.worker_id,
-                          tile.tile_id, len(results), len(poses))
-        except Exception as exc:  # the tile cannot be evaluated here: report it, go on
-            log.exception("%s: tile %d failed", self.worker_id, tile.tile_id)
-            self._deliver(self._batch(tile, results, final=False,
-                                      error=f"{type(exc).__name__}: {exc}"))
-            return None
+        streak = ErrorStreak()
+        for pose in poses:
+            if self.stop.is_set():
+                break
+            try:
+                result = self._evaluate(tile, obj, pose, donors)
+            except Exception as exc:  # this pose cannot be evaluated: store why, go on
+                log.exception("%s: tile %d: pose %s raised", self.worker_id, tile.tile_id,
+                              pose.key())
+                result = error_result(pose, exc)
+            streak.record(result)
+            if streak.systematic():  # every pose raises: the tile's fault, not the poses'
+                reason = (f"the first {streak.evaluated} poses all raised; the last: "
+                          f"{result.error}")
+                log.error("%s: tile %d failed: %s", self.worker_id, tile.tile_id, reason)
+                self._deliver(self._batch(tile, [], final=False, error=reason))
+                return None
+            results.append(result)
+            log.debug("%s: tile %d: pose %d of %d evaluated", self.worker_id,
+                      tile.tile_id, len(results), len(poses))
         final = len(results) == len(poses)
         return self._batch(tile, results, final=final, release=not final)
 
@@ -242,7 +248,7 @@ class WorkerProcess:
 
     def _evaluate(self, tile: TileLease, obj, pose, donors=None) -> PoseResult:
         if self.config.instant:
-            return _instant_result(pose)
+            return instant_result(pose)
         from graspscape.workers.sim.evaluate import evaluate_pose
 
         return evaluate_pose(pose, obj=obj, gripper=tile.gripper, settings=tile.settings,
@@ -344,36 +350,6 @@ class _Delivery:
     replies: Any  # zenoh's reply handler; None when the query could not be sent
     tile: TileLease | None = None  # a final batch's lease, to complete it (_complete)
     round: int = 0  # 1: the batch that completes a tile the coordinator found incomplete
-
-
-def _instant_result(pose: Pose) -> PoseResult:
-    """A made-up held grasp the size of a real one (contacts, joint angles), for measuring
-    the dispatch and ingest ceiling with realistic messages and rows."""
-    # Built as evaluate_pose builds its results: model_copy()s of one template took 60 %
-    # longer to serialize, a cost real workers never pay.
-    return PoseResult(**_INSTANT, pose=pose, pose_key=pose.key(), effective_r=pose.r)
-
-
-def _instant_template() -> PoseResult:
-    pose = Pose(theta=0.0, phi=0.0, r=0.0)
-    joints = {f"joint_{i}": 0.1 * i for i in range(10)}
-    links = ("palm", "finger_1_link_1", "finger_2_link_1", "finger_middle_link_1")
-    return PoseResult(
-        pose=pose, pose_key=pose.key(), outcome=Outcome.HELD, viable=True, mu_s=0.5,
-        effective_r=pose.r, effort_max_nm=1.0, contacts_per_link=dict.fromkeys(links, 1),
-        grasp=GraspConfiguration(base_position=(0.0, 0.0, 0.1),
-                                 base_orientation=(0.0, 0.0, 0.0, 1.0), joint_angles=joints),
-        signature=GraspSignature(
-            links_in_contact=links,
-            contacts=tuple(ContactPoint(link=link, position_object=(0.01, 0.02, 0.03),
-                                        normal_force_n=2.0) for link in links),
-            joint_angles=joints,
-        ),
-    )
-
-
-_INSTANT = {name: value for name, value in _instant_template() if name not in
-            ("pose", "pose_key", "effective_r")}
 
 
 def session_config(config: WorkerConfig) -> zenoh.Config:
