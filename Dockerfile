@@ -17,9 +17,9 @@ COPY configs configs
 # Editable, so the coordinator finds migrations/ and alembic.ini next to the package sources.
 RUN pip install --no-cache-dir -e .
 
-ENV GRASPSCAPE_DATA_DIR=/data \
-    GRASPSCAPE_HOST=0.0.0.0 \
-    GRASPSCAPE_PORT=8000
+ENV GRASPSCAPE_DATABASE__DATA_DIR=/data \
+    GRASPSCAPE_API__HOST=0.0.0.0 \
+    GRASPSCAPE_API__PORT=8000
 VOLUME ["/data"]
 EXPOSE 8000
 CMD ["graspscape", "serve"]

@@ -67,7 +67,7 @@ def _serve(url: str, data_dir: Path, endpoint: str) -> subprocess.Popen:
         [sys.executable, "-m", "graspscape.services.local.cli", "serve", "--database-url", url,
          "--port", str(port), "--no-migrate", "--log-level", "warning",
          "--zenoh-listen", endpoint],
-        cwd=REPO, env={**os.environ, "GRASPSCAPE_DATA_DIR": str(data_dir)},
+        cwd=REPO, env={**os.environ, "GRASPSCAPE_DATABASE__DATA_DIR": str(data_dir)},
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )
     deadline = time.monotonic() + 30
@@ -172,7 +172,7 @@ def _run(url: str, *, grid: PoseGridSpec, tile_poses: int, procs: int, instant: 
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     with tempfile.TemporaryDirectory() as tmp:
         if in_process:
-            settings = Settings(database_url=url, zenoh=ZenohSettings(enabled=True,
+            settings = Settings(database={"url": url}, zenoh=ZenohSettings(enabled=True,
                                                                       listen=[endpoint]))
             dispatcher = Dispatcher(settings, sessions)
             dispatcher.start()

@@ -22,7 +22,7 @@ target_metadata = Base.metadata
 
 
 def _url() -> str:
-    return config.attributes.get("database_url") or get_settings().resolved_database_url
+    return config.attributes.get("database_url") or get_settings().database.resolved_url
 
 
 def run_migrations_offline() -> None:

@@ -34,14 +34,14 @@ log = logging.getLogger("graspscape.coordinator")
 
 def _sweep(app: FastAPI) -> None:
     with app.state.sessionmaker() as session:
-        report = requeue_expired(session, max_attempts=app.state.settings.max_attempts)
+        report = requeue_expired(session, max_attempts=app.state.settings.queue.max_attempts)
     if report.requeued or report.failed:
         log.info("expired leases: %d tiles queued again, %d failed", report.requeued, report.failed)
 
 
 async def _sweeper(app: FastAPI) -> None:
     while True:
-        await asyncio.sleep(app.state.settings.requeue_interval_s)
+        await asyncio.sleep(app.state.settings.queue.requeue_interval_s)
         try:
             await run_in_threadpool(_sweep, app)
         except Exception:  # a database hiccup must not kill the sweeper for good
@@ -106,7 +106,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=_lifespan,
     )
     app.state.settings = settings
-    app.state.engine = db.make_engine(settings.resolved_database_url)
+    app.state.engine = db.make_engine(settings.database.resolved_url)
     app.state.sessionmaker = db.make_sessionmaker(app.state.engine)
     app.state.schema_head = db.head_revision()
     app.state.metrics = Metrics(app.state.sessionmaker)

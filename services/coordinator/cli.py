@@ -9,35 +9,25 @@ from __future__ import annotations
 import argparse
 
 
+def _given(args: argparse.Namespace, names: dict[str, str]) -> dict[str, object]:
+    """{setting: value} of the options given on the command line (option dest → setting)."""
+    values = {key: getattr(args, dest, None) for dest, key in names.items()}
+    return {key: value for key, value in values.items() if value is not None}
+
+
 def _settings(args: argparse.Namespace):  # -> Settings
     from graspscape.services.coordinator.settings import Settings
 
-    overrides = {
-        k: v
-        for k, v in {
-            "database_url": getattr(args, "database_url", None),
-            "data_dir": getattr(args, "data_dir", None),
-            "host": getattr(args, "host", None),
-            "port": getattr(args, "port", None),
-        }.items()
-        if v is not None
+    sections = {
+        "database": _given(args, {"database_url": "url", "data_dir": "data_dir"}),
+        "api": _given(args, {"host": "host", "port": "port"}),
+        "zenoh": _given(args, {
+            "dispatch": "enabled", "zenoh_mode": "mode", "zenoh_listen": "listen",
+            "zenoh_connect": "connect", "zenoh_users_file": "users_file",
+            "zenoh_allow_unauthenticated": "allow_unauthenticated"}),
     }
-    zenoh = {
-        k: v
-        for k, v in {
-            "enabled": getattr(args, "dispatch", None),
-            "mode": getattr(args, "zenoh_mode", None),
-            "listen": getattr(args, "zenoh_listen", None),
-            "connect": getattr(args, "zenoh_connect", None),
-            "users_file": getattr(args, "zenoh_users_file", None),
-            "allow_unauthenticated": getattr(args, "zenoh_allow_unauthenticated", None),
-        }.items()
-        if v is not None
-    }
-    if zenoh:
-        # Nested values merge with the config file's [zenoh] section key by key.
-        overrides["zenoh"] = zenoh
-    return Settings(**overrides)
+    # Each section merges with the environment's and the config file's key by key.
+    return Settings(**{name: values for name, values in sections.items() if values})
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -47,13 +37,14 @@ def _serve(args: argparse.Namespace) -> int:
     from sqlalchemy.engine import make_url
 
     settings = _settings(args)
-    url = settings.resolved_database_url
+    url = settings.database.resolved_url
     # The embedded SQLite file belongs to this process alone, so bringing its schema up to
     # date here is safe; a shared PostgreSQL is migrated by its own step (`db upgrade`).
     if args.migrate or (args.migrate is None and make_url(url).get_backend_name() == "sqlite"):
         db.upgrade(url)
     uvicorn.run(
-        create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level
+        create_app(settings), host=settings.api.host, port=settings.api.port,
+        log_level=args.log_level,
     )
     return 0
 
@@ -61,14 +52,14 @@ def _serve(args: argparse.Namespace) -> int:
 def _db_upgrade(args: argparse.Namespace) -> int:
     from graspscape.services.coordinator import db
 
-    db.upgrade(_settings(args).resolved_database_url, args.revision)
+    db.upgrade(_settings(args).database.resolved_url, args.revision)
     return 0
 
 
 def _db_current(args: argparse.Namespace) -> int:
     from graspscape.services.coordinator import db
 
-    engine = db.make_engine(_settings(args).resolved_database_url)
+    engine = db.make_engine(_settings(args).database.resolved_url)
     try:
         print(f"current: {db.current_revision(engine)}  head: {db.head_revision()}")
     finally:

@@ -1,5 +1,9 @@
 """Coordinator settings: defaults < configs/coordinator.toml < GRASPSCAPE_* env vars < arguments.
 
+Four sections, the same in the TOML file (`[api]`, `[queue]`, `[database]`, `[zenoh]`) and in
+the environment (`GRASPSCAPE_<SECTION>__<KEY>`, e.g. GRASPSCAPE_API__TOKEN); the flat names of
+before (GRASPSCAPE_API_TOKEN, a top-level `port`) are refused with the new name.
+
 One cached object (`get_settings`) serves the process; tests and the CLI build their own
 `Settings(...)` and hand it to `create_app`, so nothing global leaks between them. Secrets
 (the API token, a database password inside the URL) come from the environment, never the
@@ -109,39 +113,107 @@ class ZenohSettings(BaseModel):
         return self
 
 
-class Settings(BaseSettings):
-    model_config = SettingsConfigDict(
-        env_prefix="GRASPSCAPE_", env_nested_delimiter="__", extra="ignore"
-    )
+class ApiSettings(BaseModel):
+    """The REST API (`[api]` in the TOML, GRASPSCAPE_API__<KEY> in the env)."""
 
-    data_dir: Path = Field(default=Path("data"), description="folder of the embedded database")
-    database_url: str | None = Field(
-        default=None,
-        description="SQLAlchemy URL; default: SQLite file coordinator.db under data_dir",
-    )
+    model_config = ConfigDict(extra="forbid")
+
     host: str = "127.0.0.1"
     port: int = Field(default=8000, ge=1, le=65535)
-    api_token: SecretStr | None = Field(
+    token: SecretStr | None = Field(
         default=None, description="when set, mutating routes need 'Authorization: Bearer <it>'"
     )
     max_upload_bytes: int = Field(default=50 * 1024 * 1024, ge=1024)
     shared_objects_dir: Path | None = Field(
         default=None, description="folder of meshes that POST /objects may name as 'shared:<file>'"
     )
+
+    @field_validator("token", "shared_objects_dir", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        # `GRASPSCAPE_API__TOKEN=` (as compose passes an unset variable) means no token, not
+        # the empty token.
+        return None if value == "" else value
+
+
+class QueueSettings(BaseModel):
+    """Tiles, leases and limits (`[queue]`, GRASPSCAPE_QUEUE__<KEY>)."""
+
+    model_config = ConfigDict(extra="forbid")
+
     lease_seconds: float = Field(default=300.0, gt=0, description="how long a tile lease lasts")
     max_attempts: int = Field(default=3, ge=1, description="leases of a tile before it fails")
     requeue_interval_s: float = Field(default=10.0, gt=0, description="expired-lease sweep period")
     tile_target_poses: int = Field(default=100, ge=1, le=10_000, description="poses per tile")
     max_poses_per_exploration: int = Field(default=5_000_000, ge=1)
     throughput_window_s: float = Field(default=60.0, gt=0, description="window of poses/s")
-    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
-    @field_validator("api_token", "database_url", "shared_objects_dir", mode="before")
+
+class DatabaseSettings(BaseModel):
+    """Where the store lives (`[database]`, GRASPSCAPE_DATABASE__<KEY>)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    url: str | None = Field(
+        default=None,
+        description="SQLAlchemy URL; default: SQLite file coordinator.db under data_dir",
+    )
+    data_dir: Path = Field(default=Path("data"), description="folder of the embedded database")
+
+    @field_validator("url", mode="before")
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
-        # `GRASPSCAPE_API_TOKEN=` (as compose passes an unset variable) means no token, not
-        # the empty token.
         return None if value == "" else value
+
+    @property
+    def resolved_url(self) -> str:
+        if self.url:
+            return self.url
+        return f"sqlite:///{(self.data_dir / 'coordinator.db').as_posix()}"
+
+
+# The flat names before the settings were nested (issue #17): refused, naming the new place,
+# rather than silently ignored (a token that is no longer read would leave the API open).
+MOVED = {
+    "data_dir": "database.data_dir",
+    "database_url": "database.url",
+    "host": "api.host",
+    "port": "api.port",
+    "api_token": "api.token",
+    "max_upload_bytes": "api.max_upload_bytes",
+    "shared_objects_dir": "api.shared_objects_dir",
+    **{key: f"queue.{key}" for key in QueueSettings.model_fields},
+}
+
+
+def _env_name(dotted: str) -> str:
+    return "GRASPSCAPE_" + dotted.replace(".", "__").upper()
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(
+        env_prefix="GRASPSCAPE_", env_nested_delimiter="__", extra="ignore"
+    )
+
+    api: ApiSettings = Field(default_factory=ApiSettings)
+    queue: QueueSettings = Field(default_factory=QueueSettings)
+    database: DatabaseSettings = Field(default_factory=DatabaseSettings)
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _refuse_flat_names(cls, data: object) -> object:
+        old = [key for key in MOVED if os.environ.get(_env_name(key)) is not None]
+        messages = [f"{_env_name(key)} is no longer read: set {_env_name(MOVED[key])}"
+                    for key in old]
+        if isinstance(data, dict):
+            messages += [f"'{key}' is no longer read: set '{MOVED[key]}' ([{section}] {name} "
+                         "in the config file)"
+                         for key in data if key in MOVED
+                         for section, name in [MOVED[key].split(".")]]
+        if messages:
+            raise ValueError("; ".join(messages))
+        return data
 
     @classmethod
     def settings_customise_sources(
@@ -158,12 +230,6 @@ class Settings(BaseSettings):
             env_settings,
             TomlConfigSettingsSource(settings_cls, toml_file=toml_file),
         )
-
-    @property
-    def resolved_database_url(self) -> str:
-        if self.database_url:
-            return self.database_url
-        return f"sqlite:///{(self.data_dir / 'coordinator.db').as_posix()}"
 
 
 @lru_cache(maxsize=1)

@@ -26,7 +26,11 @@ from graspscape.services.coordinator.exploration.service import (
     failure_summary,
 )
 from graspscape.services.coordinator.maps.picture import write_map_files
-from graspscape.services.coordinator.settings import Settings, ZenohSettings
+from graspscape.services.coordinator.settings import (
+    DatabaseSettings,
+    Settings,
+    ZenohSettings,
+)
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
     POSE_METRIC_COLUMNS,
@@ -95,8 +99,8 @@ def _exploration(session: Session, spec: ExplorationSpec,
             if row.status in _RETRYABLE:
                 retried = retry_failed_tiles(session, exploration_id=row.id)
             return row.id, True, retried
-    row = create_exploration(session, spec=spec, tile_target_poses=settings.tile_target_poses,
-                             max_poses=settings.max_poses_per_exploration)
+    row = create_exploration(session, spec=spec, tile_target_poses=settings.queue.tile_target_poses,
+                             max_poses=settings.queue.max_poses_per_exploration)
     return row.id, False, 0
 
 
@@ -160,12 +164,12 @@ def run_explore(opts: ExploreOptions) -> int:
     data_dir.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     settings = Settings(
-        data_dir=data_dir,
-        database_url=f"sqlite:///{(data_dir / 'coordinator.db').as_posix()}",
+        database=DatabaseSettings(
+            data_dir=data_dir, url=f"sqlite:///{(data_dir / 'coordinator.db').as_posix()}"),
         zenoh=ZenohSettings(enabled=True, mode="peer", listen=[endpoint], connect=[]),
     )
     wire()
-    engine, sessions = open_store(settings.resolved_database_url)
+    engine, sessions = open_store(settings.database.resolved_url)
     spec = ExplorationSpec(
         object_id=1,  # replaced below, once the object is stored
         gripper=opts.gripper,
@@ -185,7 +189,7 @@ def run_explore(opts: ExploreOptions) -> int:
         exploration_id, resumed, retried = _exploration(session, spec, settings)
         # Every worker of this command starts now, so any lease still held is an orphan of
         # an earlier, interrupted run.
-        requeue_lost(session, alive=[], max_attempts=settings.max_attempts)
+        requeue_lost(session, alive=[], max_attempts=settings.queue.max_attempts)
         total = session.scalar(
             select(ExplorationRow.poses_total).where(ExplorationRow.id == exploration_id))
     say = (lambda *a: None) if opts.quiet else (lambda msg: print(msg, file=sys.stderr))

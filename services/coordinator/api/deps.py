@@ -27,8 +27,8 @@ def require_token(
     request: Request,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
 ) -> None:
-    """Mutating routes: with settings.api_token set, demand that token (constant-time compare)."""
-    token = request.app.state.settings.api_token
+    """Mutating routes: with settings.api.token set, demand that token (constant-time compare)."""
+    token = request.app.state.settings.api.token
     if token is None:
         return
     given = credentials.credentials if credentials is not None else ""

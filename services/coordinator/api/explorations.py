@@ -50,8 +50,8 @@ def submit(spec: ExplorationSpec, session: SessionDep, settings: SettingsDep) ->
     row = service.create_exploration(
         session,
         spec=spec,
-        tile_target_poses=settings.tile_target_poses,
-        max_poses=settings.max_poses_per_exploration,
+        tile_target_poses=settings.queue.tile_target_poses,
+        max_poses=settings.queue.max_poses_per_exploration,
     )
     return ExplorationCreated(
         id=row.id, status=row.status, tiles_total=row.tiles_total, poses_total=row.poses_total
@@ -88,7 +88,7 @@ def list_explorations(
 )
 def get_exploration(exploration_id: Id, session: SessionDep, settings: SettingsDep) -> Any:
     row = service.get_exploration(session, exploration_id=exploration_id)
-    progress = service.progress(session, row=row, window_s=settings.throughput_window_s)
+    progress = service.progress(session, row=row, window_s=settings.queue.throughput_window_s)
     failures = service.failure_summary(session, exploration_id=exploration_id)
     return ExplorationDetail.model_validate(
         {**ExplorationOut.model_validate(row).model_dump(), "progress": progress,

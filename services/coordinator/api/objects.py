@@ -82,9 +82,10 @@ def create_object(
 ) -> Any:
     length = request.headers.get("content-length")
     # Multipart overhead on top of the file is small; refuse clearly oversized bodies outright.
-    if length and length.isdigit() and int(length) > settings.max_upload_bytes + 64 * 1024:
+    if length and length.isdigit() and int(length) > settings.api.max_upload_bytes + 64 * 1024:
         raise PayloadTooLarge(
-            f"request body is larger than the upload limit of {settings.max_upload_bytes} bytes"
+            "request body is larger than the upload limit of "
+            f"{settings.api.max_upload_bytes} bytes"
         )
     props: dict[str, Any] = {
         k: v
@@ -105,13 +106,13 @@ def create_object(
     if file is not None and name:
         raise InvalidInput("give either a mesh file or a name, not both")
     if file is not None:
-        data = _read_limited(file, settings.max_upload_bytes)
+        data = _read_limited(file, settings.api.max_upload_bytes)
         row, created = service.create_uploaded(
             session, filename=file.filename, data=data, properties=props
         )
     elif name:
         row, created = service.create_named(
-            session, name=name, properties=props, shared_dir=settings.shared_objects_dir
+            session, name=name, properties=props, shared_dir=settings.api.shared_objects_dir
         )
     else:
         raise InvalidInput("give a mesh file (field 'file') or an object name (field 'name')")

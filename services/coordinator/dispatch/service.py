@@ -269,7 +269,7 @@ class Dispatcher:
                 session,
                 worker_id=request.worker_id,
                 n=n,
-                lease_seconds=self.settings.lease_seconds,
+                lease_seconds=self.settings.queue.lease_seconds,
                 host=request.host,
                 capacity=request.capacity,
             )
@@ -322,7 +322,7 @@ class Dispatcher:
                     tile_id=batch.tile_id,
                     lease_epoch=batch.lease_epoch,
                     error=f"{batch.worker_id}: {batch.error}",
-                    max_attempts=self.settings.max_attempts,
+                    max_attempts=self.settings.queue.max_attempts,
                 )
             elif batch.release and not batch.final and release_tile(
                 session, tile_id=batch.tile_id, lease_epoch=batch.lease_epoch
@@ -377,7 +377,7 @@ class Dispatcher:
         self.counters.workers_lost.inc()
         with self._store_turn, self.sessions() as session:
             requeued, failed = requeue_lost(
-                session, worker_ids=[worker_id], max_attempts=self.settings.max_attempts
+                session, worker_ids=[worker_id], max_attempts=self.settings.queue.max_attempts
             )
         if requeued or failed:
             self.counters.tiles_requeued.labels("worker_lost").inc(requeued)
@@ -410,7 +410,7 @@ class Dispatcher:
                 if not lease_owners(session) - alive:
                     return
                 requeued, failed = requeue_lost(
-                    session, alive=alive, max_attempts=self.settings.max_attempts
+                    session, alive=alive, max_attempts=self.settings.queue.max_attempts
                 )
             self.counters.tiles_requeued.labels("orphaned").inc(requeued)
             log.info("leases of workers gone since before start: %d tiles queued again, "

@@ -55,7 +55,7 @@ def _sessions(url: str | None) -> Any:
     if url is None:
         from graspscape.services.coordinator.settings import get_settings
 
-        url = get_settings().resolved_database_url
+        url = get_settings().database.resolved_url
     return db.make_sessionmaker(db.make_engine(url))
 
 

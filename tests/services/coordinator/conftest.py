@@ -25,13 +25,10 @@ def _composed() -> None:
 @pytest.fixture
 def settings(db_url: str, tmp_path: Path) -> Settings:
     return Settings(
-        database_url=db_url,
-        data_dir=tmp_path,
-        api_token=None,
-        max_upload_bytes=64 * 1024,
-        shared_objects_dir=tmp_path / "shared",
-        requeue_interval_s=3600,
-        max_poses_per_exploration=100_000,
+        database={"url": db_url, "data_dir": tmp_path},
+        api={"token": None, "max_upload_bytes": 64 * 1024,
+             "shared_objects_dir": tmp_path / "shared"},
+        queue={"requeue_interval_s": 3600, "max_poses_per_exploration": 100_000},
     )
 
 

@@ -38,8 +38,8 @@ class Coordinator:
     def __init__(self, db_url: str, data_dir: Path) -> None:
         self.port = _free_port()
         self.base = f"http://127.0.0.1:{self.port}"
-        env = {**os.environ, "GRASPSCAPE_DATA_DIR": str(data_dir)}
-        env.pop("GRASPSCAPE_API_TOKEN", None)
+        env = {**os.environ, "GRASPSCAPE_DATABASE__DATA_DIR": str(data_dir)}
+        env.pop("GRASPSCAPE_API__TOKEN", None)
         self.process = subprocess.Popen(
             [
                 sys.executable,

@@ -8,6 +8,7 @@ import pytest
 import trimesh
 from fastapi.testclient import TestClient
 from graspscape.services.coordinator.settings import Settings
+from pydantic import SecretStr
 
 from tests.factories import box_stl
 
@@ -49,7 +50,7 @@ def test_mesh_upload_is_validated_hashed_and_listed(client: TestClient) -> None:
 
 
 def test_shared_folder_objects(client: TestClient, settings: Settings) -> None:
-    folder = settings.shared_objects_dir
+    folder = settings.api.shared_objects_dir
     assert folder is not None
     folder.mkdir(parents=True)
     (folder / "tetra.obj").write_bytes(TETRA_OBJ)
@@ -125,7 +126,8 @@ def test_unknown_object_is_404(client: TestClient) -> None:
 def test_bearer_token_guards_mutating_routes(settings: Settings, tmp_path: Path) -> None:
     from graspscape.services.coordinator.app import create_app
 
-    guarded = Settings(**{**settings.model_dump(), "api_token": "s3cret"})
+    guarded = settings.model_copy(
+        update={"api": settings.api.model_copy(update={"token": SecretStr("s3cret")})})
     with TestClient(create_app(guarded)) as c:
         assert c.post("/objects", data={"name": "cube"}).status_code == 401
         wrong = c.post("/objects", data={"name": "cube"}, headers={"Authorization": "Bearer nope"})

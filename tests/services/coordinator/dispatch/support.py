@@ -56,8 +56,9 @@ class Coordinator:
 
     def start(self) -> None:
         self.port = free_port()
-        env = {**os.environ, "GRASPSCAPE_DATA_DIR": str(self.data_dir), **self.extra_env}
-        env.pop("GRASPSCAPE_API_TOKEN", None)
+        env = {**os.environ, "GRASPSCAPE_DATABASE__DATA_DIR": str(self.data_dir),
+               **self.extra_env}
+        env.pop("GRASPSCAPE_API__TOKEN", None)
         self.log = open(self.data_dir / f"coordinator-{self.port}.log", "wb")  # noqa: SIM115
         self.process = subprocess.Popen(
             [sys.executable, "-m", "graspscape.services.local.cli", "serve", "--database-url",

@@ -68,7 +68,7 @@ def test_the_dispatcher_will_not_open_an_unauthenticated_port_beyond_loopback(
 ) -> None:
     # Settings made with dispatch off pass validation; the dispatcher checks again itself.
     zs = ZenohSettings(enabled=False, listen=[f"tcp/0.0.0.0:{free_port()}"])
-    dispatcher = Dispatcher(Settings(database_url=sqlite_url, zenoh=zs), sqlite_sessions,
+    dispatcher = Dispatcher(Settings(database={"url": sqlite_url}, zenoh=zs), sqlite_sessions,
                             CollectorRegistry())
     with pytest.raises(ValueError, match="without authentication"):
         dispatcher.start()
@@ -103,7 +103,7 @@ def guarded(sqlite_url: str, sqlite_sessions: sessionmaker[Session],
     users of a dictionary file: here only the first, the second is checked by its own test."""
     registry = CollectorRegistry()
     port = free_port()
-    settings = Settings(database_url=sqlite_url, zenoh=ZenohSettings(
+    settings = Settings(database={"url": sqlite_url}, zenoh=ZenohSettings(
         enabled=True, listen=[f"tcp/127.0.0.1:{port}"], orphan_grace_s=3600,
         password="s3cret"))
     dispatcher = Dispatcher(settings, sqlite_sessions, registry)
@@ -158,7 +158,7 @@ def test_a_users_file_admits_each_of_its_users(
 ) -> None:
     users = write_users_file(tmp_path / "users", {"hostA": "pwA", "hostB": "pwB"})
     assert users.stat().st_mode & 0o777 == 0o600
-    settings = Settings(database_url=sqlite_url, zenoh=ZenohSettings(
+    settings = Settings(database={"url": sqlite_url}, zenoh=ZenohSettings(
         enabled=True, listen=[f"tcp/0.0.0.0:{free_port()}"], users_file=users,
         orphan_grace_s=3600))
     dispatcher = Dispatcher(settings, sqlite_sessions, CollectorRegistry())

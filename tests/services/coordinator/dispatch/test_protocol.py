@@ -49,7 +49,7 @@ def dispatcher(
 ) -> Iterator[Dispatcher]:
     port = free_port()
     settings = Settings(
-        database_url=any_url,
+        database={"url": any_url},
         zenoh=ZenohSettings(enabled=True, listen=[f"tcp/127.0.0.1:{port}"], orphan_grace_s=3600),
     )
     d = Dispatcher(settings, any_sessions, registry)
