@@ -5,6 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from graspscape.shared.specs.objects import ObjectSpec
 
 
 def _pose_args(parser: argparse.ArgumentParser) -> None:
@@ -12,6 +16,9 @@ def _pose_args(parser: argparse.ArgumentParser) -> None:
                         help="built-in name, pb:<name>, ycb:<Folder>, or a mesh file path")
     parser.add_argument("--mass", type=float, help="object mass, kg (mesh files)")
     parser.add_argument("--friction", type=float, help="object friction coefficient")
+    parser.add_argument("--scale", type=float, help="uniform object scale (default 1)")
+    parser.add_argument("--units", choices=["m", "cm", "mm"],
+                        help="length unit of a mesh file (default m)")
     parser.add_argument("--gripper", default="robotiq_3f", help="gripper spec name or TOML path")
     parser.add_argument("--theta", type=float, required=True, help="polar angle from +z, rad")
     parser.add_argument("--phi", type=float, required=True, help="azimuth, rad")
@@ -26,14 +33,31 @@ def _load(args: argparse.Namespace):
     from graspscape.shared.specs.pose import Pose
     from graspscape.shared.specs.sim import SimSettings
 
+    props = {"mass_kg": args.mass, "friction": args.friction, "scale": args.scale,
+             "units": args.units}
+    props = {k: v for k, v in props.items() if v is not None}
     if Path(args.object).suffix:
-        obj = ObjectSpec(mesh_path=args.object, mass_kg=args.mass, friction=args.friction)
+        obj = ObjectSpec(mesh_path=args.object, **props)
     else:
-        obj = ObjectSpec(name=args.object, mass_kg=args.mass, friction=args.friction)
+        obj = ObjectSpec(name=args.object, **props)
+    _validate(obj)
     settings = (SimSettings.model_validate_json(args.settings.read_text())
                 if args.settings else SimSettings())
     pose = Pose(theta=args.theta, phi=args.phi, r=args.r, roll=args.roll)
     return obj, settings, pose
+
+
+def _validate(obj: ObjectSpec) -> None:
+    """The one object validation before any physics: warnings to stderr, errors raised."""
+    import sys
+
+    from graspscape.workers.sim.objects import inspect_object
+    from graspscape.workers.sim.objects.errors import raise_first
+
+    report = inspect_object(obj)
+    for message in report.warning_messages():
+        print(f"warning: {message}", file=sys.stderr)
+    raise_first(report.errors)
 
 
 def _eval_pose(args: argparse.Namespace) -> int:

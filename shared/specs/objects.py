@@ -7,7 +7,12 @@ coordinator stores it by the content hash of its mesh.
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+LengthUnit = Literal["m", "cm", "mm"]
+METRES_PER: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 
 class ObjectSpec(BaseModel):
@@ -38,6 +43,11 @@ class ObjectSpec(BaseModel):
         ),
     )
     scale: float = Field(default=1.0, gt=0.0, le=100.0, description="uniform mesh scale")
+    units: LengthUnit | None = Field(
+        default=None,
+        description="length unit of a mesh file ('m', 'cm', 'mm'); default metres. "
+        "Multiplies scale; named objects are in metres already",
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> ObjectSpec:
@@ -45,4 +55,15 @@ class ObjectSpec(BaseModel):
             raise ValueError("give exactly one of 'name' and 'mesh_path'")
         if self.inertia_diag is not None and min(self.inertia_diag) <= 0:
             raise ValueError("inertia_diag entries must be positive")
+        if self.units is not None and self.name is not None:
+            raise ValueError(
+                "units apply to mesh files; a named object is in metres already (use scale)"
+            )
         return self
+
+    @property
+    def metres_per_unit(self) -> float:
+        """What one unit of the source file is in metres: scale × units."""
+        if self.units is None:
+            return self.scale  # as given, so the content hash of existing objects is unchanged
+        return self.scale * METRES_PER[self.units]

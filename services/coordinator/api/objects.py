@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
@@ -22,7 +22,10 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
     400: error("malformed multipart body"),
     413: error("upload larger than max_upload_bytes"),
     415: error("unsupported mesh file format"),
-    422: {"description": "invalid properties, name or mesh (the detail names the problem)"},
+    422: {
+        "description": "invalid properties, unknown name, or a mesh the validation refuses "
+        "(docs/objects.md, 'Validation'); the detail names each problem and what to do"
+    },
 }
 
 
@@ -79,6 +82,10 @@ def create_object(
     inertia_diag: Annotated[
         str | None, Form(max_length=200, description="'Ixx,Iyy,Izz' in kg·m²")
     ] = None,
+    units: Annotated[
+        Literal["m", "cm", "mm"] | None,
+        Form(description="length unit of the mesh file (default m); multiplies scale"),
+    ] = None,
 ) -> Any:
     length = request.headers.get("content-length")
     # Multipart overhead on top of the file is small; refuse clearly oversized bodies outright.
@@ -94,6 +101,7 @@ def create_object(
             "friction": friction,
             "scale": scale,
             "inertia_diag": _inertia(inertia_diag),
+            "units": units,
         }.items()
         if v is not None
     }

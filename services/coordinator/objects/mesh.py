@@ -1,28 +1,21 @@
-"""Light mesh validation for uploads: does it load, and is it a solid we can grasp?
+"""Mesh uploads: read the file and run the one object validation on it at POST time.
 
-The workers do the full pybullet preparation (collision shapes, inertia); the coordinator
-only refuses what can never work, early and with a message naming the problem, so a bad
-upload fails at POST time instead of on every worker.
+The check is shared/specs/object_checks.check_object, the same the workers run when they
+prepare the object, so an upload every worker would refuse fails here, once, with the
+message naming the problem and what to do; its warnings are returned and stored.
 """
 
 from __future__ import annotations
 
 import io
-import math
 
-import numpy as np
 import trimesh
 from graspscape.services.coordinator.errors import InvalidInput, UnsupportedMediaType
+from graspscape.shared.specs.object_checks import ObjectReport, check_name, check_object
+from graspscape.shared.specs.objects import ObjectSpec
 from pydantic import BaseModel
-from scipy.spatial import ConvexHull, QhullError
 
 MESH_FORMATS = ("obj", "stl", "ply", "glb", "off")
-# A grasped object larger than this is surely in millimetres, not metres.
-MAX_EXTENT_M = 5.0
-
-
-def _invalid(message: str) -> InvalidInput:
-    return InvalidInput(message, loc=("body", "file"))
 
 
 class MeshInfo(BaseModel):
@@ -31,6 +24,7 @@ class MeshInfo(BaseModel):
     watertight: bool
     volume_m3: float
     extents_m: tuple[float, float, float]
+    bodies: int | None = None  # separate bodies far apart (None: stored before it was counted)
 
 
 def mesh_format(filename: str | None) -> str:
@@ -43,44 +37,44 @@ def mesh_format(filename: str | None) -> str:
     return suffix
 
 
-def validate_mesh(data: bytes, fmt: str, *, scale: float = 1.0) -> MeshInfo:
+def refuse(report: ObjectReport, loc: tuple[str, ...]) -> None:
+    """422 with every error of the validation, each saying what to do."""
+    if report.errors:
+        raise InvalidInput("; ".join(e.message for e in report.errors), loc=loc)
+
+
+def validate_mesh(
+    data: bytes, fmt: str, spec: ObjectSpec, label: str
+) -> tuple[MeshInfo, list[str]]:
+    """The upload's mesh facts and warnings, or InvalidInput naming every problem."""
+    loc = ("body", "file")
     if not data:
-        raise _invalid("mesh file is empty")
+        raise InvalidInput("mesh file is empty", loc=loc)
     try:
         mesh = trimesh.load(io.BytesIO(data), file_type=fmt, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for malformed files
-        raise _invalid(f"mesh could not be read as .{fmt}: {exc}") from exc
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise _invalid("mesh has no faces")
-    vertices = np.asarray(mesh.vertices, dtype=float)
-    if not np.isfinite(vertices).all():
-        raise _invalid("mesh has non-finite vertex coordinates (NaN or infinity)")
-    # Loaded unprocessed so NaNs are seen above; STL repeats vertices per face, merge them so
-    # a closed surface reads as watertight.
-    mesh.merge_vertices()
-    extents = tuple(float(e) * scale for e in mesh.extents)
-    if min(extents) <= 1e-9:
-        raise _invalid("mesh is flat: zero extent along one axis, so zero volume")
-    if max(extents) > MAX_EXTENT_M:
-        raise _invalid(
-            f"mesh is {max(extents):.3g} m across at scale {scale}; meshes are in metres "
-            "(set 'scale', e.g. 0.001 for millimetres)"
-        )
-    if mesh.is_watertight:
-        volume = abs(float(mesh.volume))
-    else:
-        # An open mesh has no enclosed volume; its convex hull tells a solid from a flat sheet.
-        try:
-            volume = float(ConvexHull(vertices).volume)
-        except QhullError:
-            volume = 0.0
-    volume *= scale**3
-    if not math.isfinite(volume) or volume <= 1e-15:
-        raise _invalid("mesh has zero volume")
-    return MeshInfo(
-        vertices=len(mesh.vertices),
-        faces=len(mesh.faces),
-        watertight=bool(mesh.is_watertight),
-        volume_m3=volume,
-        extents_m=extents,  # type: ignore[arg-type]
+        raise InvalidInput(f"mesh could not be read as .{fmt}: {exc}", loc=loc) from exc
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise InvalidInput("mesh has no faces", loc=loc)
+    # Loaded unprocessed so NaNs are seen; scaled to metres as the worker will see it.
+    mesh.apply_scale(spec.metres_per_unit)
+    report = check_object(mesh, spec, label=label)
+    refuse(report, loc)
+    assert report.extents_m is not None and report.volume_m3 is not None
+    info = MeshInfo(
+        vertices=report.vertices or 0,
+        faces=report.faces or 0,
+        watertight=bool(report.watertight),
+        volume_m3=report.volume_m3,
+        extents_m=report.extents_m,
+        bodies=report.bodies,
     )
+    return info, report.warning_messages()
+
+
+def validate_name(spec: ObjectSpec) -> list[str]:
+    """A named object's warnings, or InvalidInput when the name does not exist or its size
+    at `scale` is out of bounds."""
+    report = check_name(spec)
+    refuse(report, ("body", "name"))
+    return report.warning_messages()

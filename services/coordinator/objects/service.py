@@ -12,15 +12,17 @@ from pathlib import Path
 from typing import Any
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
-from graspscape.services.coordinator.objects.mesh import mesh_format, validate_mesh
+from graspscape.services.coordinator.objects.mesh import (
+    mesh_format,
+    validate_mesh,
+    validate_name,
+)
 from graspscape.services.coordinator.store.models import ObjectRow
 from graspscape.shared.specs.objects import ObjectSpec
 from pydantic import ValidationError
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-BUILTIN_NAMES = ("sphere", "cube", "can", "dumbbell", "mug", "spiked_ball")
-_CATALOGUE_NAME = re.compile(r"^(pb|ycb):[A-Za-z0-9_.-]{1,100}$")
 SHARED_PREFIX = "shared:"
 _SHARED_FILE = re.compile(r"^[A-Za-z0-9_./-]{1,250}$")
 
@@ -33,12 +35,16 @@ def validation_message(exc: ValidationError) -> str:
     return "; ".join(parts)
 
 
-def _properties(name: str | None, mesh_path: str | None, props: dict[str, Any]) -> dict[str, Any]:
-    """Validate the physical properties through the shared ObjectSpec; keep only those set."""
+def _spec(name: str | None, mesh_path: str | None, props: dict[str, Any]) -> ObjectSpec:
+    """Validate the physical properties through the shared ObjectSpec."""
     try:
-        spec = ObjectSpec(name=name, mesh_path=mesh_path, **props)
+        return ObjectSpec(name=name, mesh_path=mesh_path, **props)
     except ValidationError as exc:
         raise InvalidInput(validation_message(exc), loc=("body",)) from exc
+
+
+def _properties(spec: ObjectSpec) -> dict[str, Any]:
+    """What is stored and sent to workers: the properties that were set."""
     return spec.model_dump(mode="json", exclude={"name", "mesh_path"}, exclude_none=True)
 
 
@@ -64,11 +70,17 @@ def _store(
     name: str,
     data: bytes | None,
     fmt: str | None,
-    properties: dict[str, Any],
+    spec: ObjectSpec,
 ) -> tuple[ObjectRow, bool]:
-    info = None
+    # The one object validation (shared/specs/object_checks.py), as the workers run it.
+    stored: dict[str, Any] | None = None
     if data is not None and fmt is not None:
-        info = validate_mesh(data, fmt, scale=properties.get("scale", 1.0))
+        info, warnings = validate_mesh(data, fmt, spec, label=name)
+        stored = {**info.model_dump(mode="json"), "warnings": warnings}
+    else:
+        warnings = validate_name(spec)
+        stored = {"warnings": warnings} if warnings else None
+    properties = _properties(spec)
     content_hash = hashlib.sha256(data).hexdigest() if data is not None else None
     found = _existing(
         session, kind=kind, name=name, content_hash=content_hash, properties=properties
@@ -82,7 +94,7 @@ def _store(
         mesh_format=fmt,
         mesh=data,
         properties=properties,
-        mesh_info=info.model_dump(mode="json") if info else None,
+        mesh_info=stored,
     )
     session.add(row)
     session.commit()
@@ -93,14 +105,14 @@ def create_uploaded(
     session: Session, *, filename: str | None, data: bytes, properties: dict[str, Any]
 ) -> tuple[ObjectRow, bool]:
     fmt = mesh_format(filename)
-    props = _properties(None, f"upload:{filename}", properties)
+    spec = _spec(None, f"upload:{filename}", properties)
     return _store(
         session,
         kind="upload",
         name=Path(filename or "mesh").name,
         data=data,
         fmt=fmt,
-        properties=props,
+        spec=spec,
     )
 
 
@@ -109,15 +121,10 @@ def create_named(
 ) -> tuple[ObjectRow, bool]:
     if name.startswith(SHARED_PREFIX):
         data, fmt = _read_shared(name.removeprefix(SHARED_PREFIX), shared_dir)
-        props = _properties(None, name, properties)
-        return _store(session, kind="shared", name=name, data=data, fmt=fmt, properties=props)
-    if name not in BUILTIN_NAMES and not _CATALOGUE_NAME.match(name):
-        raise InvalidInput(
-            f"unknown object name {name!r}: use a built-in ({', '.join(BUILTIN_NAMES)}), "
-            "'pb:<name>', 'ycb:<folder>', 'shared:<file>', or upload a mesh file"
-        )
-    props = _properties(name, None, properties)
-    return _store(session, kind="named", name=name, data=None, fmt=None, properties=props)
+        spec = _spec(None, name, properties)
+        return _store(session, kind="shared", name=name, data=data, fmt=fmt, spec=spec)
+    spec = _spec(name, None, properties)
+    return _store(session, kind="named", name=name, data=None, fmt=None, spec=spec)
 
 
 def _read_shared(relative: str, shared_dir: Path | None) -> tuple[bytes, str]:

@@ -7,19 +7,23 @@ spawn_object turns its result into a body in a given client. See docs/objects.md
 from .catalog import describe, list_builtin_objects
 from .errors import (
     EmptyMesh,
+    MassMissing,
     NonFiniteVertices,
     NotWatertight,
     ObjectError,
     TooManyFaces,
     UnknownObject,
     UnreadableMesh,
+    WrongSize,
     ZeroVolume,
 )
 from .prepare import PreparedObject, prepare_object
 from .spawn import forget_client, source_axes_orientation, spawn_object
+from .validate import inspect_object
 
 __all__ = [
     "EmptyMesh",
+    "MassMissing",
     "NonFiniteVertices",
     "NotWatertight",
     "ObjectError",
@@ -27,9 +31,11 @@ __all__ = [
     "TooManyFaces",
     "UnknownObject",
     "UnreadableMesh",
+    "WrongSize",
     "ZeroVolume",
     "describe",
     "forget_client",
+    "inspect_object",
     "list_builtin_objects",
     "prepare_object",
     "source_axes_orientation",

@@ -9,8 +9,6 @@ scaled); prepare.py moves it to the centre-of-mass frame.
 from __future__ import annotations
 
 import hashlib
-import os
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -18,10 +16,16 @@ from typing import Any, Literal
 import numpy as np
 import pybullet_data
 import trimesh
+from graspscape.shared.specs.object_names import (
+    known_names,
+    unknown_name_message,
+    ycb_folder,
+    ycb_root,
+)
 from graspscape.shared.specs.objects import ObjectSpec
 
 from .builtins import BUILTINS, DEFAULT_FRICTION, GENERATOR_VERSION, builtin_shape
-from .errors import ObjectError, UnknownObject, UnreadableMesh
+from .errors import UnknownObject
 from .meshio import (
     DEFAULT_MAX_FACES,
     check_basic,
@@ -30,6 +34,9 @@ from .meshio import (
     load_mesh_file,
     read_obj_groups,
 )
+from .urdf import UrdfObject, read_urdf
+
+__all__ = ["SourceObject", "describe", "list_builtin_objects", "resolve", "ycb_root"]
 
 MassSource = Literal["mesh", "parts"]
 
@@ -60,14 +67,6 @@ PB_ENTRIES: dict[str, PbEntry] = {
 }
 
 
-def ycb_root() -> Path:
-    """YCB folder: $GRASPSCAPE_YCB_DIR, else ../shared/objects/ycb next to the repository."""
-    env = os.environ.get("GRASPSCAPE_YCB_DIR")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[3].parent / "shared" / "objects" / "ycb"
-
-
 @dataclass(frozen=True)
 class SourceObject:
     """Geometry and physics of one object in its source frame, before COM centring."""
@@ -77,7 +76,7 @@ class SourceObject:
     parts: list[np.ndarray] | None  # convex vertex sets, or None: decompose `mesh`
     visual: trimesh.Trimesh | None  # None: show `mesh`
     mass_source: MassSource
-    mass_kg: float
+    mass_kg: float | None  # None only for a mesh file without mass_kg, which validation refuses
     friction: float
     inertia_diag: tuple[float, float, float] | None
     content_hash: str
@@ -87,12 +86,7 @@ class SourceObject:
 
 def list_builtin_objects() -> list[str]:
     """Names accepted by ObjectSpec.name: built-ins, then 'pb:' and 'ycb:' entries."""
-    names = list(BUILTINS)
-    names += [f"pb:{k}" for k in PB_ENTRIES]
-    root = ycb_root()
-    if root.is_dir():
-        names += sorted(f"ycb:{d.name}" for d in root.iterdir() if (d / "model.urdf").is_file())
-    return names
+    return known_names()
 
 
 def describe(name: str) -> dict[str, Any]:
@@ -115,9 +109,9 @@ def describe(name: str) -> dict[str, Any]:
         urdf = _ycb_urdf(name)
         return {
             "name": name, "kind": "ycb", "description": f"YCB object {name[4:]}",
-            "mass_kg": urdf.mass_kg, "friction": urdf.friction, "folder": str(urdf.folder),
+            "mass_kg": urdf.mass_kg, "friction": urdf.friction, "folder": str(urdf.path.parent),
         }
-    raise UnknownObject(_unknown_message(name))
+    raise UnknownObject(unknown_name_message(name))
 
 
 def resolve(spec: ObjectSpec, max_faces: int = DEFAULT_MAX_FACES) -> SourceObject:
@@ -131,12 +125,8 @@ def resolve(spec: ObjectSpec, max_faces: int = DEFAULT_MAX_FACES) -> SourceObjec
     if name.startswith("pb:") and name[3:] in PB_ENTRIES:
         return _pybullet_data(spec, max_faces)
     if name.startswith("ycb:"):
-        return _ycb(spec, max_faces)
-    raise UnknownObject(_unknown_message(name))
-
-
-def _unknown_message(name: str) -> str:
-    return f"unknown object '{name}'; known: {', '.join(list_builtin_objects())}"
+        return _urdf_source(_ycb_urdf(name), spec, name, max_faces)
+    raise UnknownObject(unknown_name_message(name))
 
 
 def _hash(*chunks: bytes) -> str:
@@ -158,11 +148,12 @@ def _builtin(spec: ObjectSpec) -> SourceObject:
     shape = builtin_shape(info.name)
     # Generated geometry: hash the generator identity, not float output that could differ
     # in the last bit between platforms.
-    content = _hash(f"builtin:{info.name}:v{GENERATOR_VERSION}".encode(), repr(spec.scale).encode())
+    scale = spec.metres_per_unit
+    content = _hash(f"builtin:{info.name}:v{GENERATOR_VERSION}".encode(), repr(scale).encode())
     return SourceObject(
         name=info.name,
-        mesh=_scaled(shape.mesh, spec.scale),
-        parts=[p * spec.scale for p in shape.parts],
+        mesh=_scaled(shape.mesh, scale),
+        parts=[p * scale for p in shape.parts],
         visual=None,
         mass_source="mesh",
         mass_kg=spec.mass_kg or info.mass_kg,
@@ -178,7 +169,7 @@ def _pybullet_data(spec: ObjectSpec, max_faces: int) -> SourceObject:
     key = (spec.name or "")[3:]
     e = PB_ENTRIES[key]
     root = Path(pybullet_data.getDataPath())
-    scale = e.scale * spec.scale
+    scale = e.scale * spec.metres_per_unit
     vis_path = root / e.visual
     visual = _scaled(load_mesh_file(vis_path, spec.name or key, max_faces), scale)
     chunks = [vis_path.read_bytes()]
@@ -206,68 +197,24 @@ def _hulls_mesh(parts: list[np.ndarray]) -> trimesh.Trimesh:
     return trimesh.util.concatenate([hull_mesh(p) for p in parts])
 
 
-@dataclass(frozen=True)
-class _YcbUrdf:
-    folder: Path
-    mass_kg: float
-    friction: float
-    collision: tuple[Path, np.ndarray]  # file, 4x4 transform (scale then origin)
-    visual: tuple[Path, np.ndarray] | None
+def _ycb_urdf(name: str) -> UrdfObject:
+    folder = ycb_folder(name)
+    if folder is None:
+        raise UnknownObject(unknown_name_message(name))
+    return read_urdf(folder / "model.urdf", name)
 
 
-def _origin_transform(elem: ET.Element | None) -> np.ndarray:
-    if elem is None:
-        return np.eye(4)
-    xyz = [float(v) for v in elem.get("xyz", "0 0 0").split()]
-    rpy = [float(v) for v in elem.get("rpy", "0 0 0").split()]
-    t = trimesh.transformations.euler_matrix(*rpy, axes="sxyz")  # URDF: fixed-axis r, p, y
-    t[:3, 3] = xyz
-    return t
-
-
-def _geometry(link: ET.Element, tag: str, folder: Path) -> tuple[Path, np.ndarray] | None:
-    node = link.find(tag)
-    mesh = node.find("geometry/mesh") if node is not None else None
-    if node is None or mesh is None:
-        return None
-    path = folder / mesh.get("filename", "")
-    scale = np.diag([*(float(v) for v in mesh.get("scale", "1 1 1").split()), 1.0])
-    return path, _origin_transform(node.find("origin")) @ scale
-
-
-def _ycb_urdf(name: str) -> _YcbUrdf:
-    folder = ycb_root() / name[4:]
-    urdf = folder / "model.urdf"
-    if not name[4:] or "/" in name[4:] or not urdf.is_file():
-        raise UnknownObject(_unknown_message(name))
-    try:
-        link = ET.parse(urdf).getroot().find("link")
-        assert link is not None
-        mass = float(link.find("inertial/mass").get("value"))  # type: ignore[union-attr]
-        fric = link.find("contact/lateral_friction")
-        friction = DEFAULT_FRICTION if fric is None else float(fric.get("value", DEFAULT_FRICTION))
-        collision = _geometry(link, "collision", folder)
-        assert collision is not None
-    except (ET.ParseError, AssertionError, AttributeError, TypeError, ValueError) as exc:
-        raise UnreadableMesh(f"{name}: cannot read {urdf}: {exc!r}") from exc
-    visual = _geometry(link, "visual", folder)
-    if visual is not None and not visual[0].is_file():
-        visual = None  # some YCB folders ship without their textured mesh: show the hulls
-    return _YcbUrdf(folder, mass, friction, collision, visual)
-
-
-def _ycb(spec: ObjectSpec, max_faces: int) -> SourceObject:
-    name = spec.name or ""
-    u = _ycb_urdf(name)
+def _urdf_source(u: UrdfObject, spec: ObjectSpec, name: str, max_faces: int) -> SourceObject:
+    """A URDF's object: its collision hulls, mass, friction and mesh scales and origins."""
     col_path, col_t = u.collision
-    scale_t = np.diag([spec.scale] * 3 + [1.0])
+    scale_t = np.diag([spec.metres_per_unit] * 3 + [1.0])
     parts = []
     for p in read_obj_groups(col_path, name):
         homog = np.c_[p, np.ones(len(p))]
         parts.append((homog @ (scale_t @ col_t).T)[:, :3])
     mesh = _hulls_mesh(parts)
     check_basic(mesh, name, max_faces)
-    chunks = [(u.folder / "model.urdf").read_bytes(), col_path.read_bytes()]
+    chunks = [u.path.read_bytes(), col_path.read_bytes()]
     visual = None
     if u.visual is not None:
         vis_path, vis_t = u.visual
@@ -279,22 +226,23 @@ def _ycb(spec: ObjectSpec, max_faces: int) -> SourceObject:
         mass_kg=spec.mass_kg or u.mass_kg,
         friction=spec.friction if spec.friction is not None else u.friction,
         inertia_diag=spec.inertia_diag,
-        content_hash=_hash(*chunks, repr(spec.scale).encode()),
+        content_hash=_hash(*chunks, repr(spec.metres_per_unit).encode()),
     )
 
 
 def _user_mesh(spec: ObjectSpec, max_faces: int) -> SourceObject:
     path = Path(spec.mesh_path or "")
     label = path.name or "mesh"
-    mesh = _scaled(load_mesh_file(path, label, max_faces), spec.scale)
-    if spec.mass_kg is None:
-        raise ObjectError(f"{label}: a mesh file needs mass_kg")
+    if path.suffix.lower() == ".urdf":
+        # The same object as its 'ycb:' name, when it is a YCB folder's model.urdf.
+        name = path.parent.name if path.name == "model.urdf" else path.stem
+        return _urdf_source(read_urdf(path, label), spec, name, max_faces)
+    scale = spec.metres_per_unit
+    mesh = _scaled(load_mesh_file(path, label, max_faces), scale)
     return SourceObject(
         name=path.stem, mesh=mesh, parts=None, visual=None, mass_source="mesh",
         mass_kg=spec.mass_kg,
         friction=spec.friction if spec.friction is not None else DEFAULT_FRICTION,
         inertia_diag=spec.inertia_diag,
-        content_hash=_hash(
-            path.read_bytes(), path.suffix.lower().encode(), repr(spec.scale).encode()
-        ),
+        content_hash=_hash(path.read_bytes(), path.suffix.lower().encode(), repr(scale).encode()),
     )

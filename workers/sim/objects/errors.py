@@ -7,6 +7,10 @@ problem and the object.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+from graspscape.shared.specs.object_checks import ObjectIssue
+
 
 class ObjectError(ValueError):
     """Base class: the object cannot be prepared; the message says why."""
@@ -38,3 +42,31 @@ class NotWatertight(ObjectError):
 
 class TooManyFaces(ObjectError):
     """The mesh exceeds the configured face limit (decomposition and collision get too slow)."""
+
+
+class WrongSize(ObjectError):
+    """Too small or too large for the gripper: a mesh in other units than metres."""
+
+
+class MassMissing(ObjectError):
+    """A mesh file gives no mass, and mass_kg was not given."""
+
+
+_BY_CODE: dict[str, type[ObjectError]] = {
+    "empty": EmptyMesh,
+    "non_finite": NonFiniteVertices,
+    "too_many_faces": TooManyFaces,
+    "too_small": WrongSize,
+    "too_large": WrongSize,
+    "flat": ZeroVolume,
+    "zero_volume": ZeroVolume,
+    "not_watertight": NotWatertight,
+    "mass_missing": MassMissing,
+    "unknown_name": UnknownObject,
+}
+
+
+def raise_first(errors: Sequence[ObjectIssue]) -> None:
+    """Raise the first error of a validation (shared/specs/object_checks.py) as its class."""
+    if errors:
+        raise _BY_CODE.get(errors[0].code, ObjectError)(errors[0].message)

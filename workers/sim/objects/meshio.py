@@ -13,21 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+from graspscape.shared.specs.object_checks import MAX_FACES, mesh_errors
 
-from .errors import (
-    EmptyMesh,
-    NonFiniteVertices,
-    NotWatertight,
-    TooManyFaces,
-    UnreadableMesh,
-    ZeroVolume,
-)
+from .errors import EmptyMesh, UnreadableMesh, raise_first
 
-DEFAULT_MAX_FACES = 200_000
+DEFAULT_MAX_FACES = MAX_FACES  # one limit for the coordinator's upload check and the worker
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb", ".gltf", ".off")
-# Below this size (m) along any axis a mesh is a sheet for our purposes.
-_MIN_EXTENT_M = 1e-5
-_MIN_VOLUME_M3 = 1e-12
 
 
 def load_mesh_file(path: Path, label: str, max_faces: int = DEFAULT_MAX_FACES) -> trimesh.Trimesh:
@@ -49,19 +40,8 @@ def load_mesh_file(path: Path, label: str, max_faces: int = DEFAULT_MAX_FACES) -
 
 
 def check_basic(mesh: trimesh.Trimesh, label: str, max_faces: int = DEFAULT_MAX_FACES) -> None:
-    """Checks that need no volume: non-empty, finite, within the face limit, not flat."""
-    if len(mesh.vertices) == 0 or len(mesh.faces) == 0:
-        raise EmptyMesh(f"{label}: mesh is empty (no vertices or no faces)")
-    if not np.all(np.isfinite(mesh.vertices)):
-        bad = int((~np.isfinite(mesh.vertices)).any(axis=1).sum())
-        raise NonFiniteVertices(f"{label}: {bad} vertices have NaN or infinite coordinates")
-    if len(mesh.faces) > max_faces:
-        raise TooManyFaces(
-            f"{label}: {len(mesh.faces)} faces exceed the limit of {max_faces}; simplify it"
-        )
-    extents = mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)
-    if float(extents.min()) < _MIN_EXTENT_M:
-        raise ZeroVolume(f"{label}: mesh is flat (extents {np.round(extents, 6).tolist()} m)")
+    """Checks that hold at any scale: non-empty, finite, within the face limit."""
+    raise_first(mesh_errors(mesh, label, max_faces))
 
 
 def close_planar_holes(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -98,18 +78,12 @@ def close_planar_holes(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return trimesh.Trimesh(np.vstack(vertices), np.vstack(faces), process=True)
 
 
-def solid_mesh(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
-    """Merge vertices and require a closed, positive-volume mesh (for COM and inertia)."""
+def solid_mesh(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Merged vertices, outward winding: the closed mesh (validated by check_object) whose
+    volume, centre of mass and inertia are computed."""
     solid = trimesh.Trimesh(mesh.vertices, mesh.faces, process=True)
-    if not solid.is_watertight:
-        raise NotWatertight(
-            f"{label}: mesh is not watertight (has holes or open edges), so its volume, "
-            "centre of mass and inertia are undefined; close it or give a watertight mesh"
-        )
     if solid.volume < 0:
         solid.invert()  # inside-out winding: the shape is fine, the normals point in
-    if solid.volume < _MIN_VOLUME_M3:
-        raise ZeroVolume(f"{label}: mesh encloses no volume ({solid.volume:.3g} m³)")
     return solid
 
 

@@ -23,8 +23,9 @@ from graspscape.shared.specs.objects import ObjectSpec
 
 from .catalog import SourceObject, resolve
 from .decompose import params_key, vhacd_parts
-from .errors import ObjectError
+from .errors import ObjectError, raise_first
 from .meshio import DEFAULT_MAX_FACES, hull_mesh, solid_mesh, write_mesh_obj, write_parts_obj
+from .validate import check_source
 
 # Bump when the preparation changes what lands in the cache.
 PREP_VERSION = 1
@@ -60,16 +61,20 @@ class PreparedObject:
     decomposition: Decomposition
     decomposition_cached: bool  # True when the hulls came from the on-disk cache
     prepare_seconds: float = field(default=0.0)
+    warnings: tuple[str, ...] = ()  # what the validation warned about (docs/objects.md)
 
 
 def prepare_object(
     spec: ObjectSpec, cache_dir: Path, max_faces: int = DEFAULT_MAX_FACES
 ) -> PreparedObject:
-    """Resolve, check, centre, decompose (cached) and describe one object."""
+    """Resolve, validate, centre, decompose (cached) and describe one object."""
     t0 = time.perf_counter()
     src = resolve(spec, max_faces)
+    report = check_source(src, spec, max_faces)
+    raise_first(report.errors)
+    assert src.mass_kg is not None  # a missing mass is one of the errors raised above
     if src.mass_source == "mesh":
-        solid = solid_mesh(src.mesh, src.name)
+        solid = solid_mesh(src.mesh)
     else:
         solid = trimesh.Trimesh(src.mesh.vertices, src.mesh.faces, process=False)
         if solid.volume <= 0:
@@ -124,6 +129,7 @@ def prepare_object(
         decomposition=kind,
         decomposition_cached=cached,
         prepare_seconds=time.perf_counter() - t0,
+        warnings=tuple(report.warning_messages()),
     )
 
 

@@ -244,7 +244,8 @@ def test_mesh_is_fetched_once_and_checked(
 ) -> None:
     data = trimesh.creation.box(extents=(0.05, 0.05, 0.1)).export(file_type="stl")
     with any_sessions() as session:
-        row, _ = create_uploaded(session, filename="box.stl", data=data, properties={})
+        row, _ = create_uploaded(session, filename="box.stl", data=data,
+                                 properties={"mass_kg": 0.2})
         exploration = create_exploration(
             session, spec=ExplorationSpec(object_id=row.id), tile_target_poses=100,
             max_poses=100_000)
