@@ -36,7 +36,7 @@ import psycopg
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-import graspscape.services.coordinator.store.ingest as ingest_module  # noqa: E402
+import graspscape.services.coordinator.exploration.scheduler as scheduler_module  # noqa: E402
 from graspscape.services.coordinator import db  # noqa: E402
 from graspscape.services.coordinator.dispatch.service import Dispatcher  # noqa: E402
 from graspscape.services.coordinator.exploration.service import create_exploration  # noqa: E402
@@ -193,14 +193,14 @@ def _run(url: str, *, grid: PoseGridSpec, tile_poses: int, procs: int, instant: 
 
 @contextlib.contextmanager
 def _without_adaptive_hook():
-    """Ingest without exploration.adaptive.after_ingest (refinement planning on every batch),
+    """Ingest without exploration.scheduler.after_batch (refinement planning on every batch),
     to tell the dispatch + ingest cost apart from the adaptive pass's."""
-    saved = ingest_module.after_ingest
-    ingest_module.after_ingest = lambda *args, **kwargs: None
+    saved = scheduler_module.after_batch
+    scheduler_module.after_batch = lambda *args, **kwargs: None
     try:
         yield
     finally:
-        ingest_module.after_ingest = saved
+        scheduler_module.after_batch = saved
 
 
 def _ceiling(url_of, grid: PoseGridSpec, procs: int,
@@ -299,7 +299,7 @@ def main() -> None:
                 f"worker --instant --tiles-per-request 4 --procs {args.instant_procs}, dtheta "
                 f"{args.ceiling_dtheta} deg, 6 r levels, 100-pose tiles, rate from 5 % of the "
                 "poses stored to the end; '_without_adaptive_hook': the same with "
-                "exploration.adaptive.after_ingest replaced by a no-op",
+                "exploration.scheduler.after_batch replaced by a no-op",
                 "real": f"serve + worker --procs 1|2, sphere, robotiq_3f, dtheta "
                 f"{args.real_dtheta} deg, 3 r levels, 6-pose tiles, rate between 10 % and "
                 f"90 % of the poses stored, best of {args.repeats} alternating runs each",

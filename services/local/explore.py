@@ -20,7 +20,7 @@ from pathlib import Path
 
 from graspscape.services.coordinator.dispatch.leases import requeue_lost
 from graspscape.services.coordinator.dispatch.service import Dispatcher
-from graspscape.services.coordinator.exploration.adaptive import resolve_grid
+from graspscape.services.coordinator.exploration.object_symmetry import resolve_grid
 from graspscape.services.coordinator.exploration.service import (
     create_exploration,
     failure_summary,

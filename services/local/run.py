@@ -18,16 +18,15 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 
 from graspscape.services.coordinator.dispatch.catalog import configuration_match_of
-from graspscape.services.coordinator.store.ingest import ingest_results
-from graspscape.services.coordinator.store.models import ExplorationRow
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
+from graspscape.services.coordinator.exploration.specs import stored_spec
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.services.local.compose import wire
-from graspscape.shared.specs.exploration import ConfigurationMatch, ExplorationSpec
+from graspscape.shared.specs.exploration import ConfigurationMatch
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import PoseResult
 from graspscape.shared.specs.sim import SimSettings
-from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 Evaluate = Callable[[Sequence[Pose], ConfigurationMatch | None], list[PoseResult]]
@@ -127,10 +126,8 @@ def run_local(
             break
         with sessions() as session:
             matches = {
-                eid: configuration_match_of(ExplorationSpec.model_validate(spec))
-                for eid, spec in session.execute(
-                    select(ExplorationRow.id, ExplorationRow.spec).where(
-                        ExplorationRow.id.in_({t.exploration_id for _, t in leased})))
+                eid: configuration_match_of(stored_spec(session, eid))
+                for eid in {t.exploration_id for _, t in leased}
             }
         batches = []
         for worker, tile in leased:

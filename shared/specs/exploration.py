@@ -10,7 +10,7 @@ worker.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Annotated, Literal
 
 from graspscape.shared.specs.gripper import list_grippers
 from graspscape.shared.specs.robustness import RobustnessSettings
@@ -165,6 +165,43 @@ class ShortcutsSpec(BaseModel):
     )
 
 
+class AdaptiveStrategySpec(BaseModel):
+    """The paper's exploration: the coarse grid, border refinement down to
+    `refinement.levels`, the shortcuts, local search rounds (docs/exploration.md)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: Literal["adaptive"] = "adaptive"
+
+
+class GridStrategySpec(BaseModel):
+    """The dense grid at the finest level of the lattice (`refinement.levels` halvings of
+    Δθ and Δr): every pose evaluated, no refinement, no search, no shortcuts."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: Literal["grid"]
+
+
+class RandomStrategySpec(BaseModel):
+    """`poses` poses drawn uniformly over the pose space (directions uniform on the sphere,
+    start gaps uniform in [r_min, r_max], attitudes uniform over the grid's list), repeatable
+    from `seed`; handed out in `rounds` rounds of equal size, each once the previous one is
+    stored (services/coordinator/exploration/strategies/random.py)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: Literal["random"]
+    poses: int = Field(default=1000, ge=1, le=1_000_000, description="pose budget")
+    seed: int = Field(default=0, ge=0, le=2**31 - 1)
+    rounds: int = Field(default=1, ge=1, le=100, description="rounds the budget is split into")
+
+
+StrategySpec = Annotated[
+    AdaptiveStrategySpec | GridStrategySpec | RandomStrategySpec, Field(discriminator="name")
+]
+
+
 # An exploration measures the torque margin of every held pose unless told otherwise: it is
 # what /best ranks by (docs/metrics.md, "What /best ranks by"), at about one more evaluation's
 # worth of simulation per held pose.
@@ -193,6 +230,12 @@ class ExplorationSpec(BaseModel):
     shortcuts: ShortcutsSpec = Field(default_factory=ShortcutsSpec)
     label: str | None = Field(
         default=None, max_length=200, pattern=r"^[^\x00]*$", description="free text for humans"
+    )
+    strategy: StrategySpec = Field(
+        default_factory=AdaptiveStrategySpec,
+        description="how the pose space is explored, by name: 'adaptive' (the default: coarse "
+        "grid, refinement, shortcuts, local search), 'grid' (the dense grid at the finest "
+        "level) or 'random' (a seeded uniform sample of `poses` poses)",
     )
 
     @field_validator("gripper")

@@ -69,10 +69,13 @@ class ObjectRef(BaseModel):
         return ObjectSpec(name=self.name, **self.properties)
 
 
-class TileLease(_Message):
-    """One leased tile with everything needed to evaluate it (one reply per tile)."""
+class LeasedTile(BaseModel):
+    """One tile as leased: the poses to evaluate (cells × r levels × attitudes) and the lease
+    to report under. The store's lease returns it (store/tiles.py) and the wire message
+    `TileLease` extends it, so the two cannot drift apart."""
 
-    kind: Literal["tile_lease"] = "tile_lease"
+    model_config = ConfigDict(frozen=True)
+
     tile_id: Id
     exploration_id: Id
     level: Count
@@ -82,6 +85,15 @@ class TileLease(_Message):
     cells: list[tuple[float, float]]
     r_levels: list[float]
     attitudes: list[tuple[float, float, float]]
+
+    def poses(self) -> list[Pose]:
+        return tile_poses(self.cells, self.r_levels, self.attitudes)
+
+
+class TileLease(_Message, LeasedTile):
+    """One leased tile with everything needed to evaluate it (one reply per tile)."""
+
+    kind: Literal["tile_lease"] = "tile_lease"
     object: ObjectRef
     gripper: str
     settings: SimSettings
@@ -89,8 +101,12 @@ class TileLease(_Message):
         default=None, description="shortcut 2 (see workers/sim/configuration_inference.py): "
         "its tolerance when the exploration asks for it")
 
-    def poses(self) -> list[Pose]:
-        return tile_poses(self.cells, self.r_levels, self.attitudes)
+    @classmethod
+    def of(cls, tile: LeasedTile, *, object: ObjectRef, gripper: str, settings: SimSettings,
+           configuration_match: ConfigurationMatch | None = None) -> TileLease:
+        """The lease message of a tile the store leased."""
+        return cls(**dict(tile), object=object, gripper=gripper, settings=settings,
+                   configuration_match=configuration_match)
 
 
 class ResultBatch(_Message):

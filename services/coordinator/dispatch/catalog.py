@@ -1,8 +1,9 @@
 """What a lease reply needs besides the tile: the object reference, gripper and settings.
 
 An exploration's spec and its object never change after submission, so they are read once per
-exploration and kept. The cache key includes the exploration's creation time: SQLite may give
-a deleted exploration's id to a new one, which must not inherit the old object and gripper.
+exploration and kept (the spec through the one spec cache, exploration/specs.py). The cache
+key includes the exploration's creation time: SQLite may give a deleted exploration's id to a
+new one, which must not inherit the old object and gripper.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import threading
 from dataclasses import dataclass
 from datetime import datetime
 
+from graspscape.services.coordinator.exploration.specs import stored_spec
 from graspscape.services.coordinator.store.models import ExplorationRow, ObjectRow
 from graspscape.shared.specs.exploration import ConfigurationMatch, ExplorationSpec
 from graspscape.shared.specs.sim import SimSettings
@@ -35,7 +37,9 @@ def configuration_match_of(spec: ExplorationSpec) -> ConfigurationMatch | None:
     return shortcuts.configuration_match if shortcuts.configuration_inference else None
 
 
-class Catalog:
+class WorkContexts:
+    """The work context of each exploration a lease reply names, cached per exploration."""
+
     def __init__(self) -> None:
         self._contexts: dict[tuple[int, datetime], WorkContext] = {}
         self._lock = threading.Lock()
@@ -62,12 +66,7 @@ class Catalog:
             found = self._contexts.get(key)
         if found is not None:
             return found
-        spec_json = session.scalar(
-            select(ExplorationRow.spec).where(ExplorationRow.id == exploration_id)
-        )
-        if spec_json is None:
-            raise LookupError(f"exploration {exploration_id} does not exist")
-        spec = ExplorationSpec.model_validate(spec_json)
+        spec = stored_spec(session, exploration_id, created_at)
         obj = session.execute(
             select(
                 ObjectRow.id,

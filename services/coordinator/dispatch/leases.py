@@ -1,4 +1,5 @@
-"""Queue moves the dispatch needs beyond store/queue.py: give back a worker's leases.
+"""Queue transactions the dispatch needs beyond store/queue.py: give back a worker's leases
+(the tile changes themselves are store/tiles.py's).
 
 Three cases, each one conditional UPDATE (atomic against the sweeper and a re-lease):
 - a worker hands a tile back on shutdown, or a lease reply never reached it: not the tile's
@@ -12,10 +13,11 @@ from __future__ import annotations
 from collections.abc import Collection
 from datetime import datetime
 
+from graspscape.services.coordinator.store import tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import TileRow, TileState
-from graspscape.services.coordinator.store.queue import held_under, requeue_where
-from sqlalchemy import ColumnElement, bindparam, literal, select, update
+from graspscape.services.coordinator.store.queue import requeue_where
+from sqlalchemy import ColumnElement, bindparam, literal, select
 from sqlalchemy.orm import Session
 
 
@@ -24,20 +26,9 @@ def release_tile(
 ) -> bool:
     """Put a tile back in the queue under its current lease, uncounted; False if not held."""
     now = now or utcnow()
-    result = session.execute(
-        update(TileRow)
-        .where(*held_under(tile_id, lease_epoch))
-        .values(
-            state=TileState.QUEUED,
-            attempts=TileRow.attempts - 1,
-            lease_owner=None,
-            lease_expires_at=None,
-            updated_at=now,
-        )
-        .execution_options(synchronize_session=False)
-    )
+    released = tiles.release(session, tile_id=tile_id, lease_epoch=lease_epoch, now=now)
     session.commit()
-    return result.rowcount == 1  # type: ignore[attr-defined]
+    return released
 
 
 _HELD = select(TileRow.id).where(
@@ -58,23 +49,11 @@ def release_unheld(
     held = set(session.scalars(_HELD, {"owner": worker_id}))
     if not held - set(holding):
         return 0
-    stmt = update(TileRow).where(
-        TileRow.state == TileState.LEASED, TileRow.lease_owner == worker_id
-    )
-    if holding:
-        stmt = stmt.where(TileRow.id.not_in(list(holding)))
-    result = session.execute(
-        stmt.values(
-            state=TileState.QUEUED,
-            attempts=TileRow.attempts - 1,
-            last_error=literal("lease reply lost on the way to ") + TileRow.lease_owner,
-            lease_owner=None,
-            lease_expires_at=None,
-            updated_at=now,
-        ).execution_options(synchronize_session=False)
-    )
+    released = tiles.release_all_but(
+        session, worker_id=worker_id, holding=holding, now=now,
+        error=literal("lease reply lost on the way to ") + TileRow.lease_owner)
     session.commit()
-    return result.rowcount  # type: ignore[attr-defined]
+    return released
 
 
 def requeue_lost(

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-from graspscape.services.coordinator.dispatch.catalog import Catalog, mesh_by_hash
+from graspscape.services.coordinator.dispatch.catalog import WorkContexts, mesh_by_hash
 from graspscape.services.coordinator.dispatch.counters import DispatchCounters
 from graspscape.services.coordinator.dispatch.leases import (
     lease_owners,
@@ -28,8 +28,8 @@ from graspscape.services.coordinator.dispatch.leases import (
     requeue_lost,
 )
 from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.settings import Settings
-from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.queue import fail_tile, lease_tiles
 from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.wire import keys
@@ -65,7 +65,7 @@ class Dispatcher:
         self.zs = settings.zenoh
         self.sessions = sessions
         self.counters = DispatchCounters(registry)
-        self.catalog = Catalog()
+        self.contexts = WorkContexts()
         self._work: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
         self._lost_keys: queue.SimpleQueue[str | None] = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
@@ -273,11 +273,11 @@ class Dispatcher:
                 host=request.host,
                 capacity=request.capacity,
             )
-            contexts = self.catalog.contexts(session, {t.exploration_id for t in tiles})
+            contexts = self.contexts.contexts(session, {t.exploration_id for t in tiles})
         for tile in tiles:
             ctx = contexts[tile.exploration_id]
-            message = TileLease(
-                **tile.model_dump(),
+            message = TileLease.of(
+                tile,
                 object=ctx.object,
                 gripper=ctx.gripper,
                 settings=ctx.settings,

@@ -15,8 +15,9 @@ vertical planes at multiples of π/q — the symmetry shortcut can use only the 
 lattice itself has. At each finer level the ring's azimuth count doubles, which keeps the
 nesting. The poles are one point each at every level.
 
-Points are stored as integers at the finest level D (the refinement depth): K (ring), J
-(azimuth index on ring K at level D), I (r index in steps of Δr/2^D), a (attitude index).
+Points are stored as integers at the finest level D (the refinement depth): `ring` (K),
+`azimuth` (J, the azimuth index on ring K at level D), `r_index` (I, in steps of Δr/2^D) and
+`attitude` (a, the index into the grid's attitudes); the formulas here use the letters.
 """
 
 from __future__ import annotations
@@ -33,10 +34,16 @@ TWO_PI = 2 * math.pi
 
 @dataclass(frozen=True, order=True)
 class Point:
-    K: int  # ring index at the finest level
-    J: int  # azimuth index on that ring at the finest level
-    I: int  # noqa: E741 — r index at the finest level (r = r_min + I·Δr/2^D)
-    a: int  # attitude index into the spec's attitude list
+    """A lattice point by its integer indices at the finest level (K, J, I, a above)."""
+
+    ring: int  # K: ring index at the finest level
+    azimuth: int  # J: azimuth index on that ring at the finest level
+    r_index: int  # I: r index at the finest level (r = r_min + I·Δr/2^D)
+    attitude: int  # a: attitude index into the spec's attitude list
+
+    def at_r(self, r_index: int) -> Point:
+        """The point of the same direction and attitude at another r index (its normal)."""
+        return Point(self.ring, self.azimuth, r_index, self.attitude)
 
 
 def _trailing_zeros(x: int, cap: int) -> int:
@@ -130,9 +137,9 @@ class Lattice:
     # --- points --------------------------------------------------------------------------
     def exists(self, p: Point, level: int) -> bool:
         s = self.scale(level)
-        if not self.ring_exists(p.K, level) or p.I % s:
+        if not self.ring_exists(p.ring, level) or p.r_index % s:
             return False
-        return self.is_pole(p.K) or p.J % (self.m(p.K) // self.m_at(p.K, level)) == 0
+        return self.is_pole(p.ring) or p.azimuth % (self.m(p.ring) // self.m_at(p.ring, level)) == 0
 
     def birth(self, p: Point) -> int:
         for level in range(self.depth + 1):
@@ -141,11 +148,11 @@ class Lattice:
         raise ValueError(f"{p} is not a lattice point")
 
     def pose(self, p: Point) -> Pose:
-        roll, pitch, yaw = self.attitudes[p.a]
+        roll, pitch, yaw = self.attitudes[p.attitude]
         return Pose(
-            theta=self.theta(p.K),
-            phi=0.0 if self.is_pole(p.K) else p.J * TWO_PI / self.m(p.K),
-            r=round(self.grid.r_min + p.I * self.dr(self.depth), 9),
+            theta=self.theta(p.ring),
+            phi=0.0 if self.is_pole(p.ring) else p.azimuth * TWO_PI / self.m(p.ring),
+            r=round(self.grid.r_min + p.r_index * self.dr(self.depth), 9),
             roll=roll,
             pitch=pitch,
             yaw=yaw,
@@ -200,30 +207,31 @@ class Lattice:
         """Same direction and attitude, the next r level in and out."""
         s = self.scale(level)
         top = self.n_r << self.depth
-        return [Point(p.K, p.J, i, p.a) for i in (p.I - s, p.I + s) if 0 <= i <= top]
+        return [p.at_r(i) for i in (p.r_index - s, p.r_index + s) if 0 <= i <= top]
 
     def ring_neighbours(self, p: Point, level: int) -> list[Point]:
         """Same ring, the next azimuth either way (none at a pole)."""
-        if self.is_pole(p.K) or self.m_at(p.K, level) < 2:
+        if self.is_pole(p.ring) or self.m_at(p.ring, level) < 2:
             return []
-        step = self.m(p.K) // self.m_at(p.K, level)
-        m = self.m(p.K)
-        return sorted({Point(p.K, (p.J + d * step) % m, p.I, p.a) for d in (-1, 1)})
+        step = self.m(p.ring) // self.m_at(p.ring, level)
+        m = self.m(p.ring)
+        return sorted({Point(p.ring, (p.azimuth + d * step) % m, p.r_index, p.attitude)
+                       for d in (-1, 1)})
 
     def cross_neighbours(self, p: Point, level: int) -> list[Point]:
         """Points of the rings just above and below whose azimuth cells overlap p's."""
         s = self.scale(level)
-        pole = self.is_pole(p.K)
-        phi = 0.0 if pole else p.J * TWO_PI / self.m(p.K)  # as pose() has it
-        half = math.pi / self.m_at(p.K, level)
+        pole = self.is_pole(p.ring)
+        phi = 0.0 if pole else p.azimuth * TWO_PI / self.m(p.ring)  # as pose() has it
+        half = math.pi / self.m_at(p.ring, level)
         out = []
-        for K in (p.K - s, p.K + s):
+        for K in (p.ring - s, p.ring + s):
             if not 0 <= K <= self.n_rings:
                 continue
             m_l = self.m_at(K, level)
             if pole or self.is_pole(K):
                 step = 1 if self.is_pole(K) else self.m(K) // m_l
-                out += [Point(K, j * step, p.I, p.a) for j in range(m_l)]
+                out += [Point(K, j * step, p.r_index, p.attitude) for j in range(m_l)]
                 continue
             step = self.m(K) // m_l
             # Only azimuths within half a cell of each ring's width can overlap: test those
@@ -238,7 +246,7 @@ class Lattice:
             for j in candidates:
                 gap = abs(math.remainder(j * TWO_PI / m_l - phi, TWO_PI))
                 if gap < reach:
-                    out.append(Point(K, j * step, p.I, p.a))
+                    out.append(Point(K, j * step, p.r_index, p.attitude))
         return out
 
     def attitude_neighbours(self, p: Point) -> list[Point]:
@@ -246,14 +254,14 @@ class Lattice:
         same roll (attitudes are not refined: they are neighbours at every level)."""
         per_roll = 1 + 4 * len(self.grid.attitudes.tilts)
         rolls = self.grid.attitudes.rolls
-        roll, tilt = divmod(p.a, per_roll)
+        roll, tilt = divmod(p.attitude, per_roll)
         out = {((roll + d) % rolls) * per_roll + tilt for d in (-1, 1)} if rolls > 1 else set()
         if tilt == 0:
             out |= {roll * per_roll + t for t in range(1, per_roll)}
         else:
             out.add(roll * per_roll)
-        out.discard(p.a)
-        return [Point(p.K, p.J, p.I, a) for a in sorted(out)]
+        out.discard(p.attitude)
+        return [Point(p.ring, p.azimuth, p.r_index, a) for a in sorted(out)]
 
     def neighbours(self, p: Point, level: int) -> list[tuple[str, Point]]:
         return (
@@ -266,26 +274,26 @@ class Lattice:
         """The level+1 point between two level neighbours, if it is new at level+1."""
         if level >= self.depth:
             return None
-        if p.K == q.K and p.J == q.J:  # along the normal
-            mid = Point(p.K, p.J, (p.I + q.I) // 2, p.a)
-        elif p.K == q.K:  # along the ring: the azimuth halfway, the short way round
-            m = self.m(p.K)
-            d = (q.J - p.J) % m
+        if p.ring == q.ring and p.azimuth == q.azimuth:  # along the normal
+            mid = p.at_r((p.r_index + q.r_index) // 2)
+        elif p.ring == q.ring:  # along the ring: the azimuth halfway, the short way round
+            m = self.m(p.ring)
+            d = (q.azimuth - p.azimuth) % m
             lo = p if d <= m // 2 else q
             width = min(d, m - d)
-            mid = Point(p.K, (lo.J + width // 2) % m, p.I, p.a)
+            mid = Point(p.ring, (lo.azimuth + width // 2) % m, p.r_index, p.attitude)
         else:
-            K = (p.K + q.K) // 2
-            if self.is_pole(p.K):
+            K = (p.ring + q.ring) // 2
+            if self.is_pole(p.ring):
                 phi = self.pose(q).phi
-            elif self.is_pole(q.K):
+            elif self.is_pole(q.ring):
                 phi = self.pose(p).phi
             else:
                 a, b = self.pose(p).phi, self.pose(q).phi
                 phi = a + math.remainder(b - a, TWO_PI) / 2
             m_l = self.m_at(K, level + 1)
             j = round((phi % TWO_PI) * m_l / TWO_PI) % m_l
-            mid = Point(K, j * (self.m(K) // m_l), p.I, p.a)
+            mid = Point(K, j * (self.m(K) // m_l), p.r_index, p.attitude)
         return mid if self.birth(mid) == level + 1 else None
 
     def cell_area(self, K: int, level: int) -> float:

@@ -53,8 +53,8 @@ def lookup_points(lattice: Lattice, p: Point) -> set[Point]:
             if mid is not None:
                 out.add(mid)
     s = lattice.scale(0)
-    if p.I % s == 0 and lattice.birth(p) == 0:
-        out |= {Point(p.K, p.J, i * s, p.a) for i in range(lattice.n_r + 1)}
+    if p.r_index % s == 0 and lattice.birth(p) == 0:
+        out |= {p.at_r(i * s) for i in range(lattice.n_r + 1)}
     return out
 
 
@@ -99,23 +99,23 @@ def normal_decisions(
     s = lattice.scale(0)
     if lattice.birth(p) != 0:
         return [], []
-    i = p.I // s
+    i = p.r_index // s
     proposals: list[Proposal] = []
     inferred: list[Inference] = []
     for lo, hi in normal_segments(lattice.n_r):
         if i not in (lo, hi):
             continue
-        plo, phi_ = Point(p.K, p.J, lo * s, p.a), Point(p.K, p.J, hi * s, p.a)
-        a, b = lookup(plo), lookup(phi_)
+        low, high = p.at_r(lo * s), p.at_r(hi * s)
+        a, b = lookup(low), lookup(high)
         if a is None or b is None or a.source not in SYNTHESIZED or b.source not in SYNTHESIZED:
             continue
         mid = (lo + hi) // 2
         if differs(a, b, mu_step_max):
-            proposals.append(Proposal(Point(p.K, p.J, mid * s, p.a), 0, "normal"))
+            proposals.append(Proposal(p.at_r(mid * s), 0, "normal"))
         else:
             for k in range(lo + 1, hi):
-                source = plo if k - lo <= hi - k else phi_
-                inferred.append(Inference(Point(p.K, p.J, k * s, p.a), source, "normal"))
+                source = low if k - lo <= hi - k else high
+                inferred.append(Inference(p.at_r(k * s), source, "normal"))
     return proposals, inferred
 
 

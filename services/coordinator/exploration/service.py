@@ -5,15 +5,15 @@ from __future__ import annotations
 from datetime import datetime, timedelta
 
 from graspscape.services.coordinator.errors import Conflict, InvalidInput, NotFound
-from graspscape.services.coordinator.exploration.adaptive import plan_coarse, resolve_grid
+from graspscape.services.coordinator.exploration.object_symmetry import resolve_grid
+from graspscape.services.coordinator.exploration.scheduler import initial_tiles
 from graspscape.services.coordinator.exploration.schemas import (
     FailureReason,
     FailureSummary,
     PoseFilter,
     Progress,
 )
-from graspscape.services.coordinator.exploration.tiling import count_poses
-from graspscape.services.coordinator.store import queue
+from graspscape.services.coordinator.store import queue, tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -27,10 +27,8 @@ from graspscape.services.coordinator.store.models import (
     TileState,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
-from sqlalchemy import delete, func, insert, select, update
+from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
-
-_TILE_INSERT_CHUNK = 2000
 
 
 def create_exploration(
@@ -42,20 +40,19 @@ def create_exploration(
             loc=("body", "object_id"),
         )
     spec = resolve_grid(session, spec)
-    poses_total = count_poses(spec.grid)
+    poses_total, first_tiles = initial_tiles(session, spec, target_poses=tile_target_poses)
     if poses_total > max_poses:
         raise InvalidInput(
-            f"the pose grid has {poses_total} poses, more than the limit of {max_poses}; "
-            "raise grid.dtheta or grid.dr, or use fewer attitudes",
+            f"the exploration plans {poses_total} poses, more than the limit of {max_poses}; "
+            "raise grid.dtheta or grid.dr, use fewer attitudes or a smaller pose budget",
             loc=("body", "grid"),
         )
-    tiles = plan_coarse(spec, target_poses=tile_target_poses, session=session)
     now = utcnow()
     row = ExplorationRow(
         object_id=spec.object_id,
         spec=spec.model_dump(mode="json"),
         status=ExplorationStatus.QUEUED,
-        tiles_total=len(tiles),
+        tiles_total=len(first_tiles),
         poses_total=poses_total,
         poses_done=0,
         viable_count=0,
@@ -64,24 +61,7 @@ def create_exploration(
     )
     session.add(row)
     session.flush()
-    values = [
-        {
-            "exploration_id": row.id,
-            "level": 0,
-            "index": t.index,
-            "cells": [list(c) for c in t.cells],
-            "r_levels": t.r_levels,
-            "attitudes": [list(a) for a in t.attitudes],
-            "n_poses": t.n_poses,
-            "state": TileState.QUEUED,
-            "lease_epoch": 0,
-            "attempts": 0,
-            "updated_at": now,
-        }
-        for t in tiles
-    ]
-    for start in range(0, len(values), _TILE_INSERT_CHUNK):
-        session.execute(insert(TileRow), values[start : start + _TILE_INSERT_CHUNK])
+    tiles.add_tiles(session, exploration_id=row.id, level=0, tiles=first_tiles, now=now)
     session.commit()
     return row
 
@@ -153,15 +133,7 @@ def cancel_exploration(session: Session, *, exploration_id: int) -> ExplorationR
     if row.status in FINISHED_STATUSES:
         raise Conflict(f"exploration {exploration_id} is already {row.status}; nothing to cancel")
     now = utcnow()
-    session.execute(
-        update(TileRow)
-        .where(
-            TileRow.exploration_id == exploration_id,
-            TileRow.state.in_((TileState.QUEUED, TileState.LEASED)),
-        )
-        .values(state=TileState.CANCELLED, lease_owner=None, lease_expires_at=None, updated_at=now)
-        .execution_options(synchronize_session=False)
-    )
+    tiles.cancel_open(session, exploration_id=exploration_id, now=now)
     row.status = ExplorationStatus.CANCELLED
     row.finished_at = now
     row.updated_at = now

@@ -210,7 +210,7 @@ class Orbits:
             q = self.lattice.point(pose)
         except ValueError:
             return None
-        if not 0 <= q.K <= self.lattice.n_rings or self.lattice.pose(q).key() != pose.key():
+        if not 0 <= q.ring <= self.lattice.n_rings or self.lattice.pose(q).key() != pose.key():
             return None
         return q
 

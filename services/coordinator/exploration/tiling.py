@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 from itertools import pairwise
 
-from graspscape.services.coordinator.exploration.lattice import Lattice
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.shared.specs.exploration import PoseGridSpec
 from graspscape.shared.specs.pose import Pose
 
@@ -34,11 +34,9 @@ class TilePlan:
         return len(self.cells) * len(self.r_levels) * len(self.attitudes)
 
 
-def rings(grid: PoseGridSpec) -> list[list[Cell]]:
-    """The coarse grid's approach directions, ring by ring from θ = 0 to θ = π."""
-    lattice = Lattice(grid)
+def _rings(lattice: Lattice, level: int) -> list[list[Cell]]:
     out: list[list[Cell]] = []
-    for K, J in lattice.cells(0):
+    for K, J in lattice.cells(level):
         cell = (lattice.theta(K), 0.0 if lattice.is_pole(K) else J * 2 * math.pi / lattice.m(K))
         if not out or out[-1][0][0] != cell[0]:
             out.append([])
@@ -46,19 +44,26 @@ def rings(grid: PoseGridSpec) -> list[list[Cell]]:
     return out
 
 
-def cells_per_tile_for(grid: PoseGridSpec, target_poses: int) -> int:
-    """How many cells make a tile of about `target_poses` poses (at least one cell)."""
-    per_cell = len(grid.r_levels()) * len(grid.attitudes.attitudes())
-    return max(1, target_poses // per_cell)
+def rings(grid: PoseGridSpec) -> list[list[Cell]]:
+    """The coarse grid's approach directions, ring by ring from θ = 0 to θ = π."""
+    return _rings(Lattice(grid), 0)
 
 
 def coarse_tiles(grid: PoseGridSpec, *, target_poses: int = 100) -> list[TilePlan]:
     """The level-0 tiles of a grid, in a fixed order."""
-    r_levels = grid.r_levels()
-    attitudes = grid.attitudes.attitudes()
-    per_tile = cells_per_tile_for(grid, target_poses)
+    return dense_tiles(Lattice(grid), target_poses=target_poses)
+
+
+def dense_tiles(lattice: Lattice, *, target_poses: int = 100) -> list[TilePlan]:
+    """Tiles of every pose of the lattice at its finest level, ring by ring, in a fixed
+    order (with depth 0: the coarse grid's tiles)."""
+    level = lattice.depth
+    r_levels = [lattice.pose(Point(0, 0, i, 0)).r
+                for i in range(lattice.n_r * lattice.scale(0) + 1)]
+    attitudes = lattice.attitudes
+    per_tile = max(1, target_poses // (len(r_levels) * len(attitudes)))
     tiles: list[TilePlan] = []
-    for ring in rings(grid):
+    for ring in _rings(lattice, level):
         sectors = math.ceil(len(ring) / per_tile)
         # Even sector sizes (differing by at most one) rather than a short last sector.
         bounds = [round(k * len(ring) / sectors) for k in range(sectors + 1)]

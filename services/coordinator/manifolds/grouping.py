@@ -149,7 +149,7 @@ def _embed(lattice: Lattice, pts: list[Point]) -> np.ndarray:
     out = np.empty((len(pts), 4))
     for i, p in enumerate(pts):
         x, y, z = lattice.direction(p)
-        out[i] = (x, y, z, p.I * lattice.dr(lattice.depth) * scale)
+        out[i] = (x, y, z, p.r_index * lattice.dr(lattice.depth) * scale)
     return out
 
 
@@ -187,10 +187,10 @@ def fine_labels(
     labels = np.full(len(points), NON_VIABLE)
     by_att: dict[int, list[Point]] = {}
     for p in samples:
-        by_att.setdefault(p.a, []).append(p)
+        by_att.setdefault(p.attitude, []).append(p)
     fine_by_att: dict[int, list[int]] = {}
     for idx, p in enumerate(points):
-        fine_by_att.setdefault(p.a, []).append(idx)
+        fine_by_att.setdefault(p.attitude, []).append(idx)
     for a, known in by_att.items():
         known = sorted(known)
         tree = cKDTree(_embed(lattice, known))

@@ -17,8 +17,9 @@ from typing import Any
 
 import numpy as np
 from graspscape.services.coordinator.errors import NotFound
-from graspscape.services.coordinator.exploration.adaptive import lattice_of, load_samples, spec_of
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
+from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.manifolds.behaviour import Sample
 from graspscape.services.coordinator.manifolds.grouping import (
     FALLBACK_RADIUS,
@@ -78,7 +79,7 @@ def compute_map(
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
-    spec = spec_of(row.spec, exploration_id)
+    spec = spec_of(row)
     lattice = lattice_of(spec)
     samples = samples if samples is not None else load_samples(session, exploration_id, lattice)
     mesh = object_mesh(session, row.object_id)

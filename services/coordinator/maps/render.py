@@ -81,7 +81,7 @@ def cut_field(
     dirs = (np.outer(np.cos(ang.ravel()), e1) + np.outer(np.sin(ang.ravel()), e2))
     labels = np.full(X.shape, np.nan)
     mu = np.full(X.shape, np.nan)
-    known = sorted(p for p in samples if p.a == attitude)
+    known = sorted(p for p in samples if p.attitude == attitude)
     if known and inside.any():
         kd = np.array([lattice.direction(p) for p in known])
         kr = np.array([samples[p].r for p in known])

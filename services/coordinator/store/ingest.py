@@ -1,4 +1,7 @@
-"""Result ingest: one batch of pose results (one tile) in one transaction, idempotently.
+"""Result ingest: store one batch of pose results (one tile), idempotently.
+
+The batch is stored in the caller's transaction, which exploration/scheduler.py commits once
+the exploration's strategy has decided what comes next.
 
 `INSERT … ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable` stores each pose
 once and tells exactly which rows are new, so the exploration's counters only count those: a
@@ -22,10 +25,10 @@ import json
 from collections.abc import Sequence
 from datetime import datetime
 from functools import lru_cache
-from typing import Any
+from typing import Any, NamedTuple
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
-from graspscape.services.coordinator.exploration.adaptive import after_ingest
+from graspscape.services.coordinator.store import tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
     POSE_METRIC_COLUMNS,
@@ -42,6 +45,17 @@ from pydantic import BaseModel
 from pydantic_core import to_json
 from sqlalchemy import bindparam, select, update
 from sqlalchemy.orm import Session
+
+
+class StoredBatch(NamedTuple):
+    """What storing a batch did, for the scheduler that decides what comes next: the report
+    for the worker, and the exploration's status and creation time when the batch changed
+    anything (None otherwise: nothing to react to)."""
+
+    report: IngestReport
+    exploration_id: int
+    exploration_status: str | None
+    exploration_created_at: datetime | None
 
 
 class IngestReport(BaseModel):
@@ -231,7 +245,7 @@ _STORED = select(PoseRow.pose_key).where(
 )
 _KEY_CHUNK = 500
 _SHOWN_KEYS = 10
-# The exploration's counters; it returns the status and creation time the adaptive hook needs.
+# The exploration's counters; it returns the status and creation time the scheduler needs.
 _COUNT = (
     update(ExplorationRow)
     .where(ExplorationRow.id == bindparam("exploration_id"))
@@ -242,24 +256,6 @@ _COUNT = (
     )
     .returning(ExplorationRow.status, ExplorationRow.created_at)
 )
-_MOVABLE = (TileState.LEASED, TileState.QUEUED)
-_FINISH_TILE = (
-    update(TileRow)
-    .where(
-        TileRow.id == bindparam("tile_id"),
-        TileRow.state.in_(_MOVABLE),
-        TileRow.lease_epoch == bindparam("epoch"),
-    )
-    .values(
-        state=TileState.DONE,
-        done_at=bindparam("now"),
-        updated_at=bindparam("now"),
-        lease_owner=None,
-        lease_expires_at=None,
-    )
-)
-
-
 def _not_holder(tile: Any, tile_id: int, lease_epoch: int, worker_id: str) -> str | None:
     """Why a report under (worker_id, lease_epoch) is not from the tile's latest lease, or
     None when it is."""
@@ -289,7 +285,7 @@ def _stored_keys(connection: Any, exploration_id: int, keys: Sequence[str]) -> s
     return stored
 
 
-def ingest_results(
+def store_batch(
     session: Session,
     *,
     tile_id: int,
@@ -298,9 +294,10 @@ def ingest_results(
     results: Sequence[PoseResult],
     final: bool = True,
     now: datetime | None = None,
-) -> IngestReport:
+) -> StoredBatch:
     """Store a batch of results of one tile; with `final`, the tile is finished by it once
-    every pose of the tile is stored.
+    every pose of the tile is stored. The caller commits (exploration/scheduler.py, after
+    asking the exploration's strategy what comes next in the same transaction).
 
     Raises NotFound (no such tile), NotLeaseHolder (not from the tile's latest lease) or
     InvalidInput (a result whose key does not match its pose, or a pose not of this tile);
@@ -352,17 +349,15 @@ def ingest_results(
 
     moved = False
     state = tile.state
-    # The epochs match (checked above). The tile may be `queued` if the lease ran out but
-    # nobody re-leased it yet: the complete result then still finishes it, sparing a second
-    # evaluation.
-    movable = final and tile.state in _MOVABLE
+    # The epochs match (checked above).
+    movable = final and tiles.finishable(tile.state)
     exploration = None
     if inserted or movable:
         # The counters first: the exploration row's lock, held to the commit, makes the
         # ingests of one exploration take turns. The tile, and whether it was the
         # exploration's last open one, only after it: a statement started once the lock is
         # held reads the others' tiles as committed (on PostgreSQL each statement reads what
-        # was committed when it started). It also returns what the adaptive hook needs.
+        # was committed when it started). It also returns what the scheduler needs.
         exploration = connection.execute(
             _COUNT,
             {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
@@ -377,23 +372,14 @@ def ingest_results(
         missing = sorted(set(absent) - _stored_keys(connection, tile.exploration_id, absent))
         movable = not missing
     if movable:
-        done = connection.execute(
-            _FINISH_TILE, {"tile_id": tile_id, "epoch": lease_epoch, "now": now}
-        )
-        moved = done.rowcount == 1
+        moved = tiles.finish(session, tile_id=tile_id, lease_epoch=lease_epoch, now=now)
         if moved:
             state = TileState.DONE
             finish_complete_explorations(session, [tile.exploration_id], now=now)
-    if exploration is not None and (inserted or moved):
-        # Adaptive exploration (exploration/adaptive.py): border refinement, shortcuts, local
-        # search and manifolds, decided from what is stored now. In this transaction, after the
-        # counter update whose row lock makes ingests of one exploration take turns.
-        after_ingest(
-            session, exploration_id=tile.exploration_id, results=results, tile_moved=moved,
-            now=now, status=exploration.status, created_at=exploration.created_at,
-        )
-    session.commit()
-    return IngestReport(
+    report = IngestReport(
         inserted=inserted, duplicates=len(results) - inserted, tile_state=state, tile_moved=moved,
         missing=missing,
     )
+    if exploration is None or not (inserted or moved):
+        return StoredBatch(report, tile.exploration_id, None, None)
+    return StoredBatch(report, tile.exploration_id, exploration.status, exploration.created_at)

@@ -98,11 +98,11 @@ class ExplorationRow(Base):
 class TileRow(Base):
     __tablename__ = "tiles"
     __table_args__ = (
-        UniqueConstraint("exploration_id", "level", "index"),
+        UniqueConstraint("exploration_id", "round", "level", "index"),
         Index("ix_tiles_state_lease_expires_at", "state", "lease_expires_at"),
         # Leasing reads queued tiles in this order; the index makes it a range scan instead of
         # a sort of every queued tile on each lease.
-        Index("ix_tiles_queue_order", "state", "exploration_id", "level", "id"),
+        Index("ix_tiles_queue_order", "state", "exploration_id", "round", "level", "id"),
         Index("ix_tiles_exploration_id_state", "exploration_id", "state"),
         # Tile ids travel on the wire: a deleted tile's id must never name another tile.
         {"sqlite_autoincrement": True},
@@ -110,7 +110,11 @@ class TileRow(Base):
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     exploration_id: Mapped[int] = mapped_column(ForeignKey("explorations.id", ondelete="CASCADE"))
-    level: Mapped[int] = mapped_column(Integer, default=0)  # 0 = coarse pass
+    # The strategy's round of work that planned the tile: 0 for the first pass and all that
+    # refines it, k ≥ 1 for the k-th later round (adaptive: local search round k; random: its
+    # slice k + 1). Tiles are leased by round, then level, then id.
+    round: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    level: Mapped[int] = mapped_column(Integer, default=0)  # lattice level; 0 = coarse pass
     index: Mapped[int] = mapped_column(Integer)
     cells: Mapped[list[Any]] = mapped_column(JSON)  # [[θ, φ], ...]
     r_levels: Mapped[list[Any]] = mapped_column(JSON)

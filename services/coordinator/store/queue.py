@@ -1,6 +1,7 @@
-"""The tile queue: lease, renew, fail, and put expired leases back.
+"""The tile queue's transactions: lease, renew, fail, put expired leases back, retry.
 
-Each function is one transaction and commits it. Leasing is a single
+Each function is one transaction and commits it; the tile changes themselves are
+store/tiles.py's (the one module that writes tile state). Leasing is a single
 `UPDATE … WHERE id IN (SELECT … LIMIT n) RETURNING …`: on PostgreSQL the inner SELECT takes
 `FOR UPDATE SKIP LOCKED`, so concurrent leasers never get the same tile nor wait on each
 other; on SQLite the statement runs under the single write lock, which gives the same.
@@ -12,9 +13,9 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from datetime import datetime, timedelta
-from typing import Any
 
 from graspscape.services.coordinator.errors import Conflict, NotFound
+from graspscape.services.coordinator.store import tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.dialect import is_postgres
 from graspscape.services.coordinator.store.models import (
@@ -25,29 +26,10 @@ from graspscape.services.coordinator.store.models import (
     TileState,
 )
 from graspscape.services.coordinator.store.workers import touch_worker
-from graspscape.shared.specs.pose import Pose, tile_poses
-from pydantic import BaseModel, ConfigDict
+from graspscape.shared.wire.messages import LeasedTile
+from pydantic import BaseModel
 from sqlalchemy import ColumnElement, String, bindparam, case, cast, literal, select, update
 from sqlalchemy.orm import Session
-
-
-class LeasedTile(BaseModel):
-    """What a worker gets for one tile: the poses to evaluate and the lease to report under."""
-
-    model_config = ConfigDict(frozen=True)
-
-    tile_id: int
-    exploration_id: int
-    level: int
-    index: int
-    lease_epoch: int
-    lease_expires_at: datetime
-    cells: list[tuple[float, float]]
-    r_levels: list[float]
-    attitudes: list[tuple[float, float, float]]
-
-    def poses(self) -> list[Pose]:
-        return tile_poses(self.cells, self.r_levels, self.attitudes)
 
 
 class RequeueReport(BaseModel):
@@ -55,42 +37,6 @@ class RequeueReport(BaseModel):
     failed: int
 
 
-def _lease_statement(*, skip_locked: bool) -> Any:
-    candidates = (
-        select(TileRow.id)
-        .where(TileRow.state == TileState.QUEUED)
-        .order_by(TileRow.exploration_id, TileRow.level, TileRow.id)
-        .limit(bindparam("n"))
-    )
-    if skip_locked:
-        candidates = candidates.with_for_update(skip_locked=True)
-    return (
-        update(TileRow)
-        .where(TileRow.id.in_(candidates.scalar_subquery()))
-        .values(
-            state=TileState.LEASED,
-            lease_owner=bindparam("owner"),
-            lease_expires_at=bindparam("expires"),
-            lease_epoch=TileRow.lease_epoch + 1,
-            attempts=TileRow.attempts + 1,
-            updated_at=bindparam("now"),
-        )
-        .returning(
-            TileRow.id,
-            TileRow.exploration_id,
-            TileRow.level,
-            TileRow.index,
-            TileRow.lease_epoch,
-            TileRow.lease_expires_at,
-            TileRow.cells,
-            TileRow.r_levels,
-            TileRow.attitudes,
-        )
-    )
-
-
-# Built once: a lease is several statements, and building them took longer than running them.
-_LEASE = {False: _lease_statement(skip_locked=False), True: _lease_statement(skip_locked=True)}
 _START_EXPLORATIONS = (
     update(ExplorationRow)
     .where(
@@ -117,45 +63,15 @@ def lease_tiles(
         return []
     now = now or utcnow()
     session.flush()  # what the session holds goes first, as autoflush would do it
-    connection = session.connection()
-    rows = connection.execute(
-        _LEASE[is_postgres(session)],
-        {"n": n, "owner": worker_id, "expires": now + timedelta(seconds=lease_seconds),
-         "now": now},
-    ).all()
-    leased = sorted(
-        (
-            LeasedTile(
-                tile_id=row.id,
-                exploration_id=row.exploration_id,
-                level=row.level,
-                index=row.index,
-                lease_epoch=row.lease_epoch,
-                lease_expires_at=row.lease_expires_at,
-                cells=row.cells,
-                r_levels=row.r_levels,
-                attitudes=row.attitudes,
-            )
-            for row in rows
-        ),
-        key=lambda t: t.tile_id,
-    )
+    leased = tiles.lease(session, worker_id=worker_id, n=n,
+                         expires=now + timedelta(seconds=lease_seconds), now=now,
+                         skip_locked=is_postgres(session))
     exploration_ids = sorted({t.exploration_id for t in leased})
     if exploration_ids:
-        connection.execute(_START_EXPLORATIONS, {"ids": exploration_ids, "now": now})
+        session.connection().execute(_START_EXPLORATIONS, {"ids": exploration_ids, "now": now})
     touch_worker(session, worker_id=worker_id, host=host, capacity=capacity, now=now)
     session.commit()
     return leased
-
-
-def held_under(tile_id: int, lease_epoch: int) -> tuple[ColumnElement[bool], ...]:
-    """The tile is leased, under the lease a worker reports for: the one condition every
-    worker report must meet before it may move a tile."""
-    return (
-        TileRow.id == tile_id,
-        TileRow.state == TileState.LEASED,
-        TileRow.lease_epoch == lease_epoch,
-    )
 
 
 def renew_lease(
@@ -168,14 +84,10 @@ def renew_lease(
 ) -> bool:
     """Extend a lease that is still current; False if it was lost (expired and re-leased)."""
     now = now or utcnow()
-    result = session.execute(
-        update(TileRow)
-        .where(*held_under(tile_id, lease_epoch))
-        .values(lease_expires_at=now + timedelta(seconds=lease_seconds), updated_at=now)
-        .execution_options(synchronize_session=False)
-    )
+    renewed = tiles.renew(session, tile_id=tile_id, lease_epoch=lease_epoch,
+                          expires=now + timedelta(seconds=lease_seconds), now=now)
     session.commit()
-    return result.rowcount == 1  # type: ignore[attr-defined]
+    return renewed
 
 
 def fail_tile(
@@ -197,22 +109,8 @@ def fail_tile(
         raise NotFound(f"tile {tile_id} does not exist")
     lock_explorations(session, [exploration_id])
     # One conditional UPDATE: atomic against the sweeper and a re-lease on both databases.
-    row = session.execute(
-        update(TileRow)
-        .where(*held_under(tile_id, lease_epoch))
-        .values(
-            state=case(
-                (TileRow.attempts >= max_attempts, TileState.FAILED.value),
-                else_=TileState.QUEUED.value,
-            ),
-            last_error=error[:4000],
-            lease_owner=None,
-            lease_expires_at=None,
-            updated_at=now,
-        )
-        .returning(TileRow.state, TileRow.exploration_id)
-        .execution_options(synchronize_session=False)
-    ).one_or_none()
+    row = tiles.fail_or_requeue(session, tile_id=tile_id, lease_epoch=lease_epoch, error=error,
+                                max_attempts=max_attempts, now=now)
     if row is None:  # unknown tile, or a stale epoch: nothing changes
         session.rollback()
         state = session.scalar(select(TileRow.state).where(TileRow.id == tile_id))
@@ -247,35 +145,13 @@ def requeue_where(
     lock_explorations(session, explorations)
     # Tiles that came to match since are left to the next call: their explorations are not
     # locked here.
-    leased = (*leased, TileRow.exploration_id.in_(explorations))
-    failed_rows = session.execute(
-        update(TileRow)
-        .where(*leased, TileRow.attempts >= max_attempts)
-        .values(
-            state=TileState.FAILED,
-            last_error=failed_error,
-            lease_owner=None,
-            lease_expires_at=None,
-            updated_at=now,
-        )
-        .returning(TileRow.exploration_id)
-        .execution_options(synchronize_session=False)
-    ).all()
-    requeued = session.execute(
-        update(TileRow)
-        .where(*leased)
-        .values(
-            state=TileState.QUEUED,
-            last_error=requeued_error,
-            lease_owner=None,
-            lease_expires_at=None,
-            updated_at=now,
-        )
-        .execution_options(synchronize_session=False)
-    )
-    finish_complete_explorations(session, {row[0] for row in failed_rows}, now=now)
+    requeued, failed = tiles.requeue_leased(
+        session, (*conditions, TileRow.exploration_id.in_(explorations)),
+        max_attempts=max_attempts, now=now, failed_error=failed_error,
+        requeued_error=requeued_error)
+    finish_complete_explorations(session, failed, now=now)
     session.commit()
-    return requeued.rowcount, len(failed_rows)  # type: ignore[attr-defined]
+    return requeued, len(failed)
 
 
 def requeue_expired(
@@ -371,13 +247,7 @@ def retry_failed_tiles(
     if status == ExplorationStatus.CANCELLED:
         session.rollback()
         raise Conflict(f"exploration {exploration_id} is cancelled; submit it again instead")
-    requeued = session.execute(
-        update(TileRow)
-        .where(TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED)
-        .values(state=TileState.QUEUED, attempts=0, lease_owner=None, lease_expires_at=None,
-                updated_at=now)
-        .execution_options(synchronize_session=False)
-    ).rowcount  # type: ignore[attr-defined]
+    requeued = tiles.retry_failed(session, exploration_id=exploration_id, now=now)
     if not requeued:
         session.rollback()
         raise Conflict(f"exploration {exploration_id} has no failed tiles to retry")

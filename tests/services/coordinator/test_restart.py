@@ -16,8 +16,8 @@ import httpx
 import pytest
 from fastapi.testclient import TestClient
 from graspscape.services.coordinator.app import create_app
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.store.base import utcnow
-from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.queue import lease_tiles
 from sqlalchemy.orm import Session, sessionmaker
 

@@ -7,8 +7,8 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.tiling import count_poses
-from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.services.coordinator.store.workers import heartbeat

@@ -64,7 +64,8 @@ def test_levels_are_nested_and_keys_stable() -> None:
         assert lattice.point(lattice.pose(p)) == p
         # the same grid point through a shallower lattice has the same pose key
         shallow = Lattice(GRIDS[0], 0)
-        q = Point(p.K >> 3, p.J >> 3 if not lattice.is_pole(p.K) else 0, p.I >> 3, p.a)
+        q = Point(p.ring >> 3, p.azimuth >> 3 if not lattice.is_pole(p.ring) else 0,
+                  p.r_index >> 3, p.attitude)
         assert shallow.pose(q).key() == lattice.pose(p).key()
 
 
@@ -93,17 +94,17 @@ def test_neighbours_are_symmetric_and_midpoints_new() -> None:
 def _overlapping_by_scan(lattice: Lattice, p: Point, level: int) -> list[Point]:
     """Cross neighbours by testing every azimuth of the adjacent rings for overlap."""
     phi = lattice.pose(p).phi
-    half = math.pi / lattice.m_at(p.K, level)
+    half = math.pi / lattice.m_at(p.ring, level)
     out = []
-    for K in (p.K - lattice.scale(level), p.K + lattice.scale(level)):
+    for K in (p.ring - lattice.scale(level), p.ring + lattice.scale(level)):
         if not 0 <= K <= lattice.n_rings:
             continue
         m_l = lattice.m_at(K, level)
         step = 1 if lattice.is_pole(K) else lattice.m(K) // m_l
         for j in range(m_l):
             gap = abs(math.remainder(j * 2 * math.pi / m_l - phi, 2 * math.pi))
-            if lattice.is_pole(p.K) or lattice.is_pole(K) or gap < half + math.pi / m_l - 1e-9:
-                out.append(Point(K, j * step, p.I, p.a))
+            if lattice.is_pole(p.ring) or lattice.is_pole(K) or gap < half + math.pi / m_l - 1e-9:
+                out.append(Point(K, j * step, p.r_index, p.attitude))
     return out
 
 

@@ -8,12 +8,13 @@ import threading
 from collections.abc import Callable
 from datetime import timedelta
 
-import graspscape.services.coordinator.store.ingest as ingest_module
+import graspscape.services.coordinator.exploration.scheduler as scheduler_module
 import pytest
 from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import cancel_exploration
 from graspscape.services.coordinator.store.base import utcnow
-from graspscape.services.coordinator.store.ingest import _PER_POSE, _values, ingest_results
+from graspscape.services.coordinator.store.ingest import _PER_POSE, _values
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
 from graspscape.services.coordinator.store.queue import (
     LeasedTile,
@@ -453,15 +454,15 @@ def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
     what was committed when it started, so the check must come after the row lock)."""
     eid, (first, second) = all_but_two_reported(sessions)
     inside, go_on = threading.Event(), threading.Event()
-    hook = ingest_module.after_ingest
+    hook = scheduler_module.after_batch
 
-    def held_open(session: Session, **kwargs: object) -> None:
-        hook(session, **kwargs)  # type: ignore[arg-type]
+    def held_open(session: Session, *args: object) -> None:
+        hook(session, *args)  # type: ignore[arg-type]
         if threading.current_thread().name == "first":  # keep its transaction open
             inside.set()
             go_on.wait(30)
 
-    monkeypatch.setattr(ingest_module, "after_ingest", held_open)
+    monkeypatch.setattr(scheduler_module, "after_batch", held_open)
 
     def report(t: LeasedTile) -> None:
         with sessions() as s:
@@ -489,14 +490,14 @@ def test_a_failure_and_an_ingest_on_the_last_two_tiles_finish_the_exploration(
     lock before touching a tile, as ingest does)."""
     eid, (reported, failing) = all_but_two_reported(sessions)
     inside, go_on = threading.Event(), threading.Event()
-    hook = ingest_module.after_ingest
+    hook = scheduler_module.after_batch
 
-    def held_open(session: Session, **kwargs: object) -> None:
-        hook(session, **kwargs)  # type: ignore[arg-type]
+    def held_open(session: Session, *args: object) -> None:
+        hook(session, *args)  # type: ignore[arg-type]
         inside.set()
         go_on.wait(30)
 
-    monkeypatch.setattr(ingest_module, "after_ingest", held_open)
+    monkeypatch.setattr(scheduler_module, "after_batch", held_open)
 
     def report() -> None:
         with sessions() as s:

@@ -44,9 +44,9 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     foreign keys enforced, dropping the old explorations table would have deleted every
     tile, pose and manifold by cascade."""
     from alembic import command
+    from graspscape.services.coordinator.exploration.scheduler import ingest_results
     from graspscape.services.coordinator.exploration.service import create_exploration
     from graspscape.services.coordinator.objects.service import create_named
-    from graspscape.services.coordinator.store.ingest import ingest_results
     from graspscape.services.coordinator.store.queue import lease_tiles
     from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
     from sqlalchemy import text
@@ -54,7 +54,8 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     from tests.factories import fake_results
 
     url = f"sqlite:///{tmp_path / 'old.db'}"
-    db.upgrade(url, "0005")
+    # The data is made by today's code, then the schema taken back to 0005 with it.
+    db.upgrade(url)
     engine = db.make_engine(url)
     sessions = db.make_sessionmaker(engine)
     spec = {"grid": PoseGridSpec(dtheta=1.0, r_max=0.02)}
@@ -70,10 +71,19 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     def snapshot() -> dict[str, object]:
         with engine.connect() as c:
             return {
-                table: c.execute(text(f"SELECT * FROM {table} ORDER BY id")).all()
-                for table in ("explorations", "tiles", "poses", "objects")
+                table: c.execute(text(f"SELECT {columns} FROM {table} ORDER BY id")).all()
+                for table, columns in (
+                    ("explorations", "*"), ("poses", "*"), ("objects", "*"),
+                    # the columns of 0005 (0007 adds `round`)
+                    ("tiles", 'id, exploration_id, level, "index", cells, r_levels, attitudes, '
+                              "n_poses, state, lease_owner, lease_expires_at, lease_epoch, "
+                              "attempts, last_error, updated_at, done_at"),
+                )
             }
 
+    engine.dispose()
+    command.downgrade(db.alembic_config(url), "0005")
+    engine = db.make_engine(url)
     before = snapshot()
     assert before["poses"] and all(p.tile_id is not None for p in before["poses"])
     engine.dispose()
@@ -106,4 +116,49 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
         sql = c.execute(text("SELECT sql FROM sqlite_master WHERE name = 'tiles'")).scalar_one()
         assert "AUTOINCREMENT" not in sql
         assert c.execute(text("SELECT count(*) FROM poses")).scalar_one() == len(before["poses"])
+    engine.dispose()
+
+
+def test_0007_stores_the_search_round_explicitly_and_back(tmp_path) -> None:
+    """Tiles of local search round k were stored at level 100 + k: 0007 gives them round k
+    and the exploration's finest level, keeping every other tile; the downgrade restores
+    the old levels."""
+    from alembic import command
+    from sqlalchemy import text
+
+    url = f"sqlite:///{tmp_path / 'rounds.db'}"
+    db.upgrade(url, "0006")
+    engine = db.make_engine(url)
+    now = "2026-12-01 00:00:00.000000"
+    levels = [(0, 0), (0, 1), (2, 0), (100, 0), (100, 1), (101, 0)]  # (level, index)
+    with engine.begin() as c:
+        c.execute(text("INSERT INTO objects (id, kind, name, properties, created_at) "
+                       "VALUES (1, 'named', 'sphere', '{}', :now)"), {"now": now})
+        c.execute(text(
+            "INSERT INTO explorations (id, object_id, spec, status, tiles_total, poses_total, "
+            "poses_done, viable_count, created_at, updated_at) VALUES (1, 1, :spec, 'running', "
+            "6, 6, 0, 0, :now, :now)"),
+            {"spec": '{"object_id": 1, "refinement": {"levels": 2}}', "now": now})
+        for level, index in levels:
+            c.execute(text(
+                'INSERT INTO tiles (exploration_id, level, "index", cells, r_levels, attitudes, '
+                "n_poses, state, lease_epoch, attempts, updated_at) VALUES (1, :level, :index, "
+                "'[]', '[]', '[]', 0, 'queued', 0, 0, :now)"),
+                {"level": level, "index": index, "now": now})
+    order = 'SELECT round, level, "index" FROM tiles ORDER BY id'
+    engine.dispose()
+    db.upgrade(url)
+    engine = db.make_engine(url)
+    with engine.connect() as c:
+        assert c.execute(text(order)).all() == [
+            (0, 0, 0), (0, 0, 1), (0, 2, 0), (1, 2, 0), (1, 2, 1), (2, 2, 0)]
+        context = MigrationContext.configure(c, opts={"compare_type": True})
+        assert compare_metadata(context, Base.metadata) == []
+        sql = c.execute(text("SELECT sql FROM sqlite_master WHERE name = 'tiles'")).scalar_one()
+        assert "AUTOINCREMENT" in sql
+    engine.dispose()
+    command.downgrade(db.alembic_config(url), "0006")
+    engine = db.make_engine(url)
+    with engine.connect() as c:
+        assert c.execute(text('SELECT level, "index" FROM tiles ORDER BY id')).all() == levels
     engine.dispose()

@@ -10,9 +10,9 @@ from typing import Any
 import pyarrow.parquet as pq
 import pytest
 from fastapi.testclient import TestClient
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.manifolds import service as manifolds
 from graspscape.services.coordinator.manifolds.export import COLUMNS
-from graspscape.services.coordinator.store.ingest import ingest_results
 from graspscape.services.coordinator.store.models import POSE_METRIC_COLUMNS, PoseRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.results import Outcome, PoseResult, RobustnessReport

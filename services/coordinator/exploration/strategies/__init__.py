@@ -1,0 +1,1 @@
+"""Exploration strategies behind one interface (base.py); chosen by name (registry.py)."""

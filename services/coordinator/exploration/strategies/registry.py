@@ -1,0 +1,20 @@
+"""The strategies by name, as the spec names them (`ExplorationSpec.strategy`)."""
+
+from __future__ import annotations
+
+from graspscape.services.coordinator.exploration.strategies.adaptive import AdaptiveStrategy
+from graspscape.services.coordinator.exploration.strategies.base import Strategy
+from graspscape.services.coordinator.exploration.strategies.grid import GridStrategy
+from graspscape.services.coordinator.exploration.strategies.random import RandomStrategy
+from graspscape.shared.specs.exploration import ExplorationSpec
+
+_BY_NAME: dict[str, type] = {
+    "adaptive": AdaptiveStrategy,
+    "grid": GridStrategy,
+    "random": RandomStrategy,
+}
+
+
+def strategy_for(spec: ExplorationSpec) -> Strategy:
+    """The strategy the spec names, for this exploration (cheap: made per batch)."""
+    return _BY_NAME[spec.strategy.name](spec)

@@ -1,0 +1,259 @@
+"""The one owner of tile state: every change of a tile's state and lease columns is made here.
+
+queued → leased (lease) → done (finish), or back to queued (a lost or expired lease, a
+failure under the attempt cap, a hand-back), or failed (at the cap), or cancelled (with its
+exploration); failed → queued again on a retry. Each function is one statement (or one batch
+of statements) inside the caller's transaction: the callers (store/queue.py, store/ingest.py,
+dispatch/leases.py, the exploration service and scheduler) decide when to commit and which
+exploration rows to lock first (store/queue.lock_explorations). Nothing else in the
+coordinator writes `TileRow.state`, `lease_owner`, `lease_expires_at`, `lease_epoch` or
+`attempts`, so the rules of the queue can be read in one module.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Sequence
+from datetime import datetime
+from typing import Any, Protocol
+
+from graspscape.services.coordinator.store.models import TileRow, TileState
+from graspscape.shared.wire.messages import LeasedTile
+from sqlalchemy import ColumnElement, bindparam, case, insert, select, update
+from sqlalchemy.orm import Session
+
+_INSERT_CHUNK = 2000
+
+
+class TileShape(Protocol):
+    """A planned tile (exploration/tiling.TilePlan): the store needs only its shape."""
+
+    index: int
+    cells: Sequence[Sequence[float]]
+    r_levels: list[float]
+    attitudes: Sequence[Sequence[float]]
+
+    @property
+    def n_poses(self) -> int: ...
+
+
+def add_tiles(session: Session, *, exploration_id: int, level: int, tiles: Sequence[TileShape],
+              now: datetime, round: int = 0) -> int:
+    """Queue new tiles of one exploration in one round at one level; returns how many."""
+    values = [
+        {
+            "exploration_id": exploration_id, "round": round, "level": level, "index": t.index,
+            "cells": [list(c) for c in t.cells], "r_levels": t.r_levels,
+            "attitudes": [list(a) for a in t.attitudes], "n_poses": t.n_poses,
+            "state": TileState.QUEUED, "lease_epoch": 0, "attempts": 0, "updated_at": now,
+        }
+        for t in tiles
+    ]
+    for start in range(0, len(values), _INSERT_CHUNK):
+        session.execute(insert(TileRow), values[start : start + _INSERT_CHUNK])
+    return len(values)
+
+
+# --- leasing ---------------------------------------------------------------------------------
+def _lease_statement(*, skip_locked: bool) -> Any:
+    candidates = (
+        select(TileRow.id)
+        .where(TileRow.state == TileState.QUEUED)
+        .order_by(TileRow.exploration_id, TileRow.round, TileRow.level, TileRow.id)
+        .limit(bindparam("n"))
+    )
+    if skip_locked:
+        candidates = candidates.with_for_update(skip_locked=True)
+    return (
+        update(TileRow)
+        .where(TileRow.id.in_(candidates.scalar_subquery()))
+        .values(
+            state=TileState.LEASED,
+            lease_owner=bindparam("owner"),
+            lease_expires_at=bindparam("expires"),
+            lease_epoch=TileRow.lease_epoch + 1,
+            attempts=TileRow.attempts + 1,
+            updated_at=bindparam("now"),
+        )
+        .returning(
+            TileRow.id.label("tile_id"),
+            TileRow.exploration_id,
+            TileRow.level,
+            TileRow.index,
+            TileRow.lease_epoch,
+            TileRow.lease_expires_at,
+            TileRow.cells,
+            TileRow.r_levels,
+            TileRow.attitudes,
+        )
+    )
+
+
+# Built once: a lease is several statements, and building them took longer than running them.
+_LEASE = {False: _lease_statement(skip_locked=False), True: _lease_statement(skip_locked=True)}
+
+
+def lease(session: Session, *, worker_id: str, n: int, expires: datetime, now: datetime,
+          skip_locked: bool) -> list[LeasedTile]:
+    """Up to n queued tiles leased to a worker (oldest exploration, then earliest round,
+    then lowest level first), by tile id. Every lease bumps the epoch: ingest refuses
+    reports made under an older one."""
+    rows = session.connection().execute(
+        _LEASE[skip_locked], {"n": n, "owner": worker_id, "expires": expires, "now": now}
+    ).all()
+    return sorted((LeasedTile.model_validate(row._mapping) for row in rows),
+                  key=lambda t: t.tile_id)
+
+
+def held_under(tile_id: int, lease_epoch: int) -> tuple[ColumnElement[bool], ...]:
+    """The tile is leased, under the lease a worker reports for: the one condition every
+    worker report must meet before it may move a tile."""
+    return (
+        TileRow.id == tile_id,
+        TileRow.state == TileState.LEASED,
+        TileRow.lease_epoch == lease_epoch,
+    )
+
+
+def renew(session: Session, *, tile_id: int, lease_epoch: int, expires: datetime,
+          now: datetime) -> bool:
+    """Extend a lease that is still current; False if it was lost."""
+    result = session.execute(
+        update(TileRow)
+        .where(*held_under(tile_id, lease_epoch))
+        .values(lease_expires_at=expires, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+    return result.rowcount == 1  # type: ignore[attr-defined]
+
+
+# --- ending a lease --------------------------------------------------------------------------
+_MOVABLE = (TileState.LEASED, TileState.QUEUED)
+_FINISH = (
+    update(TileRow)
+    .where(
+        TileRow.id == bindparam("tile_id"),
+        TileRow.state.in_(_MOVABLE),
+        TileRow.lease_epoch == bindparam("epoch"),
+    )
+    .values(
+        state=TileState.DONE,
+        done_at=bindparam("now"),
+        updated_at=bindparam("now"),
+        lease_owner=None,
+        lease_expires_at=None,
+    )
+)
+
+
+def finishable(state: str) -> bool:
+    """Whether a complete batch may finish a tile in this state: leased, or queued again under
+    the same epoch (the lease ran out but nobody re-leased it yet: the complete result still
+    finishes it, sparing a second evaluation)."""
+    return state in _MOVABLE
+
+
+def finish(session: Session, *, tile_id: int, lease_epoch: int, now: datetime) -> bool:
+    """Done, every pose of it stored (the caller checked); False if the epoch moved on."""
+    done = session.connection().execute(
+        _FINISH, {"tile_id": tile_id, "epoch": lease_epoch, "now": now})
+    return done.rowcount == 1
+
+
+def fail_or_requeue(session: Session, *, tile_id: int, lease_epoch: int, error: str,
+                    max_attempts: int, now: datetime) -> Any:
+    """A worker could not evaluate its tile: queued again, or failed at max_attempts. Returns
+    the row's (state, exploration_id), or None if the lease is not current."""
+    return session.execute(
+        update(TileRow)
+        .where(*held_under(tile_id, lease_epoch))
+        .values(
+            state=case(
+                (TileRow.attempts >= max_attempts, TileState.FAILED.value),
+                else_=TileState.QUEUED.value,
+            ),
+            last_error=error[:4000],
+            lease_owner=None,
+            lease_expires_at=None,
+            updated_at=now,
+        )
+        .returning(TileRow.state, TileRow.exploration_id)
+        .execution_options(synchronize_session=False)
+    ).one_or_none()
+
+
+def requeue_leased(session: Session, leased: Sequence[ColumnElement[bool]], *,
+                   max_attempts: int, now: datetime, failed_error: ColumnElement[str],
+                   requeued_error: ColumnElement[str]) -> tuple[int, set[int]]:
+    """Leased tiles matching `leased` back to the queue, or failed once their attempts reached
+    the cap. Returns (requeued, ids of the explorations with a newly failed tile)."""
+    failed_rows = session.execute(
+        update(TileRow)
+        .where(TileRow.state == TileState.LEASED, *leased, TileRow.attempts >= max_attempts)
+        .values(state=TileState.FAILED, last_error=failed_error, lease_owner=None,
+                lease_expires_at=None, updated_at=now)
+        .returning(TileRow.exploration_id)
+        .execution_options(synchronize_session=False)
+    ).all()
+    requeued = session.execute(
+        update(TileRow)
+        .where(TileRow.state == TileState.LEASED, *leased)
+        .values(state=TileState.QUEUED, last_error=requeued_error, lease_owner=None,
+                lease_expires_at=None, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+    return requeued.rowcount, {row[0] for row in failed_rows}  # type: ignore[attr-defined]
+
+
+def release(session: Session, *, tile_id: int, lease_epoch: int, now: datetime) -> bool:
+    """Back to the queue under its current lease, the attempt not counted (a worker handed it
+    back on shutdown); False if not held."""
+    result = session.execute(
+        update(TileRow)
+        .where(*held_under(tile_id, lease_epoch))
+        .values(state=TileState.QUEUED, attempts=TileRow.attempts - 1, lease_owner=None,
+                lease_expires_at=None, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+    return result.rowcount == 1  # type: ignore[attr-defined]
+
+
+def release_all_but(session: Session, *, worker_id: str, holding: Collection[int],
+                    error: ColumnElement[str], now: datetime) -> int:
+    """Tiles leased to a worker, except those it holds, back to the queue uncounted (their
+    lease reply never reached it); returns how many."""
+    stmt = update(TileRow).where(
+        TileRow.state == TileState.LEASED, TileRow.lease_owner == worker_id
+    )
+    if holding:
+        stmt = stmt.where(TileRow.id.not_in(list(holding)))
+    result = session.execute(
+        stmt.values(state=TileState.QUEUED, attempts=TileRow.attempts - 1, last_error=error,
+                    lease_owner=None, lease_expires_at=None, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+    return result.rowcount  # type: ignore[attr-defined]
+
+
+def cancel_open(session: Session, *, exploration_id: int, now: datetime) -> None:
+    """Its exploration was cancelled: queued and leased tiles are not handed out any more."""
+    session.execute(
+        update(TileRow)
+        .where(
+            TileRow.exploration_id == exploration_id,
+            TileRow.state.in_((TileState.QUEUED, TileState.LEASED)),
+        )
+        .values(state=TileState.CANCELLED, lease_owner=None, lease_expires_at=None, updated_at=now)
+        .execution_options(synchronize_session=False)
+    )
+
+
+def retry_failed(session: Session, *, exploration_id: int, now: datetime) -> int:
+    """The failed tiles of an exploration queued again, attempts from zero; returns how many.
+    Each keeps its last_error until it is done or fails again."""
+    return session.execute(
+        update(TileRow)
+        .where(TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED)
+        .values(state=TileState.QUEUED, attempts=0, lease_owner=None, lease_expires_at=None,
+                updated_at=now)
+        .execution_options(synchronize_session=False)
+    ).rowcount  # type: ignore[attr-defined]
