@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import pybullet as p
 from graspscape.shared.specs.pose import Pose
+from graspscape.workers.sim.bullet import get_pose
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.trajectory import reference_pose
 
@@ -37,11 +38,10 @@ def weld_reading(evaluator, pose: Pose) -> list[float]:
     evaluator._place(start[0], start[1])
     scene = evaluator.scene
     cid, hand, obj = scene.client, scene.hand.body, scene.object_body
-    hp, ho = p.getBasePositionAndOrientation(hand, physicsClientId=cid)
-    op, oo = p.getBasePositionAndOrientation(obj, physicsClientId=cid)
-    relative = p.multiplyTransforms(*p.invertTransform(hp, ho), op, oo)
-    weld = p.createConstraint(hand, -1, obj, -1, p.JOINT_FIXED, [0, 0, 0], relative[0],
-                              [0, 0, 0], relative[1], physicsClientId=cid)
+    relative_pos, relative_orn = p.multiplyTransforms(
+        *p.invertTransform(*get_pose(cid, hand)), *get_pose(cid, obj))
+    weld = p.createConstraint(hand, -1, obj, -1, p.JOINT_FIXED, [0, 0, 0], relative_pos,
+                              [0, 0, 0], relative_orn, physicsClientId=cid)
     p.changeConstraint(weld, maxForce=WELD_MAX_FORCE_N, physicsClientId=cid)
     for link in scene.hand.link_names:
         p.setCollisionFilterPair(hand, obj, link, -1, 0, physicsClientId=cid)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +31,13 @@ from graspscape.shared.specs.results import (
 )
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.bullet import (
+    get_closest_points,
+    remove_state,
+    restore_state,
+    save_state,
+    saved_state,
+)
 from graspscape.workers.sim.configuration_inference import DonorPool, inferred
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.grasp_metrics import scene_metrics
@@ -90,7 +97,7 @@ class Evaluator:
         else:
             self.length = float(metric.characteristic_length)
         self.spread = gripper.spread_modes.get(self.settings.spread_mode, 0.0)
-        self.pristine = p.saveState(physicsClientId=cid)
+        self.pristine = save_state(cid)
 
     def close(self) -> None:
         if p.isConnected(self.client):
@@ -106,7 +113,7 @@ class Evaluator:
     # --- phases --------------------------------------------------------------------------
     def _reset(self) -> None:
         scene, cid = self.scene, self.client
-        p.restoreState(self.pristine, physicsClientId=cid)
+        restore_state(cid, self.pristine)
         # A saved state holds no contact cache: the last evaluation's manifolds survive a
         # restore, and the order in which manifolds were made is the order the solver visits
         # contacts. A collision pass here, where nothing overlaps, drops them all.
@@ -120,9 +127,9 @@ class Evaluator:
 
     def _penetrating(self) -> bool:
         tolerance = self.settings.placement.penetration_tolerance_m
-        points = p.getClosestPoints(self.scene.hand.body, self.scene.object_body,
-                                    distance=0.0, physicsClientId=self.client)
-        return any(pt[8] < -tolerance for pt in points)
+        points = get_closest_points(self.client, self.scene.hand.body, self.scene.object_body,
+                                    0.0)
+        return any(pt.contact_distance < -tolerance for pt in points)
 
     def _place(self, position: np.ndarray, rotation: np.ndarray) -> None:
         hand = self.scene.hand
@@ -189,8 +196,9 @@ class Evaluator:
         obj_pos, obj_rot = scene.object_pose()
         base_pos, base_rot = hand.frame_pose()
         rel_rot = obj_rot.T @ base_rot
-        raw = [(hand.link_names[c[3]], tuple((obj_rot.T @ (np.array(c[6]) - obj_pos)).tolist()),
-                c[9]) for c in scene.contacts()]
+        raw = [(hand.link_names[c.link_index_a],
+                tuple((obj_rot.T @ (np.array(c.position_on_b) - obj_pos)).tolist()),
+                c.normal_force) for c in scene.contacts()]
         angles = hand.joint_angles()
         result["grasp"] = GraspConfiguration(
             base_position=tuple((obj_rot.T @ (base_pos - obj_pos)).tolist()),
@@ -232,7 +240,7 @@ class Evaluator:
             yield result, grasp
         finally:
             if grasp is not None:
-                p.removeState(grasp.state, physicsClientId=self.client)
+                remove_state(self.client, grasp.state)
 
     def robustness(self, pose: Pose, settings: RobustnessSettings | None = None, *,
                    picture: Path | None = None, donors: DonorPool | None = None,
@@ -304,28 +312,27 @@ class Evaluator:
         # its response differs from a rollout's by up to 0.08 m/s of ~0.3.
         saved: dict[int, int] = {}
         window = metric.window_steps
-        for step in range(n_steps if held else 0):
-            if probes and step in instants:
-                saved[step] = p.saveState(physicsClientId=cid)
-            position, rotation = target(step + 1)
-            scene.drive_to(position, rotation)
-            scene.step()
-            phases.trajectory_steps += 1
-            effort = max(effort, hand.max_finger_torque())
-            if step % 10 == 9 and slipped():
+        with ExitStack() as kept:  # the instants' states are freed however this ends
+            for step in range(n_steps if held else 0):
+                if probes and step in instants:
+                    saved[step] = kept.enter_context(saved_state(cid, restore=False))
+                position, rotation = target(step + 1)
+                scene.drive_to(position, rotation)
+                scene.step()
+                phases.trajectory_steps += 1
+                effort = max(effort, hand.max_finger_torque())
+                if step % 10 == 9 and slipped():
+                    held = False
+                    break
+            if held and (slipped() or not scene.in_contact()):
                 held = False
-                break
-        if held and (slipped() or not scene.in_contact()):
-            held = False
-        phases.trajectory_s += time.perf_counter() - t0
-        qualities: list[float] = []
-        tp = time.perf_counter()
-        central = metric.differences == "central"
-        for step, state in sorted(saved.items()):
-            if held:
+            phases.trajectory_s += time.perf_counter() - t0
+            qualities: list[float] = []
+            tp = time.perf_counter()
+            central = metric.differences == "central"
+            for step, state in sorted(saved.items()) if held else ():
                 qualities.append(probe_instant(ctx, step, dt, metric, self.length, state=state))
                 phases.sensitivity_steps += (12 if central else 7) * window
-            p.removeState(state, physicsClientId=cid)
         phases.sensitivity_s += time.perf_counter() - tp
         return held, qualities, effort
 

@@ -27,9 +27,10 @@ generators.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
-import pybullet as p
+from graspscape.workers.sim.bullet import get_dynamics_info
 from scipy.spatial import ConvexHull, QhullError
 
 STANDARD_GRAVITY = 9.81
@@ -134,28 +135,37 @@ def mu_m(contacts: list[Contact], length: float, weight_n: float,
         / weight_n
 
 
-def merge_by_link(points: list[tuple[str, np.ndarray, np.ndarray, float, float]]) -> list[Contact]:
-    """One contact per link: (link, position, inward normal, normal force, friction) points →
-    force-weighted centroid and mean normal. pybullet reports 1–4 manifold points per touching
-    pair, a number set by its collision algorithm, not the grasp; merging keeps the metrics
-    from counting that artefact."""
-    by_link: dict[str, list] = {}
+class LinkPoint(NamedTuple):
+    """One contact point of a hand link on the object, object frame."""
+
+    link: str
+    position: np.ndarray
+    normal: np.ndarray  # unit, pointing into the object
+    force: float  # normal force, N
+    friction: float  # the pair's combined Coulomb coefficient
+
+
+def merge_by_link(points: list[LinkPoint]) -> list[Contact]:
+    """One contact per link: its points → force-weighted centroid and mean normal. pybullet
+    reports 1–4 manifold points per touching pair, a number set by its collision algorithm,
+    not the grasp; merging keeps the metrics from counting that artefact."""
+    by_link: dict[str, list[LinkPoint]] = {}
     for point in points:
-        by_link.setdefault(point[0], []).append(point)
+        by_link.setdefault(point.link, []).append(point)
     merged = []
     for link in sorted(by_link):
         pts = by_link[link]
-        forces = np.array([pt[3] for pt in pts])
+        forces = np.array([pt.force for pt in pts])
         total = float(forces.sum())
         weights = forces / total if total > 1e-12 else np.full(len(pts), 1.0 / len(pts))
-        position = sum(w * pt[1] for w, pt in zip(weights, pts, strict=True))
-        normal = sum(w * pt[2] for w, pt in zip(weights, pts, strict=True))
+        position = sum(w * pt.position for w, pt in zip(weights, pts, strict=True))
+        normal = sum(w * pt.normal for w, pt in zip(weights, pts, strict=True))
         norm = float(np.linalg.norm(normal))
         if norm < 1e-9:  # opposing points on one link cancel: keep the strongest one's
-            normal = pts[int(np.argmax(forces))][2]
+            normal = pts[int(np.argmax(forces))].normal
             norm = float(np.linalg.norm(normal))
         merged.append(Contact(position=np.asarray(position), normal=normal / norm,
-                              friction=pts[0][4], force=total))
+                              friction=pts[0].friction, force=total))
     return merged
 
 
@@ -163,17 +173,18 @@ def scene_contacts(scene) -> list[Contact]:
     """The synthesized grasp's contacts in the object frame, one per link."""
     hand, cid = scene.hand, scene.client
     obj_pos, obj_rot = scene.object_pose()
-    obj_mu = p.getDynamicsInfo(scene.object_body, -1, physicsClientId=cid)[1]
+    obj_mu = get_dynamics_info(cid, scene.object_body).lateral_friction
     points = []
     for c in scene.contacts():
-        link = c[3]
+        link = c.link_index_a
         # pybullet combines the two bodies' lateral frictions by multiplying them.
-        mu = obj_mu * p.getDynamicsInfo(hand.body, link, physicsClientId=cid)[1]
-        position = obj_rot.T @ (np.array(c[6]) - obj_pos)
-        # contactNormalOnB points from the object (B) toward the hand (A): the hand pushes
-        # the object the other way.
-        normal = -(obj_rot.T @ np.array(c[7]))
-        points.append((hand.link_names[link], position, normal, max(c[9], 0.0), mu))
+        mu = obj_mu * get_dynamics_info(cid, hand.body, link).lateral_friction
+        position = obj_rot.T @ (np.array(c.position_on_b) - obj_pos)
+        # The normal points from the object (B) toward the hand (A): the hand pushes the
+        # object the other way.
+        normal = -(obj_rot.T @ np.array(c.contact_normal_on_b))
+        points.append(LinkPoint(hand.link_names[link], position, normal,
+                                max(c.normal_force, 0.0), mu))
     return merge_by_link(points)
 
 

@@ -72,6 +72,12 @@ import numpy as np
 import pybullet as p
 from graspscape.shared.specs.results import PhaseTimes, RobustnessReport
 from graspscape.shared.specs.robustness import RobustnessSettings
+from graspscape.workers.sim.bullet import (
+    get_constraint_info,
+    get_dynamics_info,
+    restore_state_clean,
+    save_state,
+)
 from scipy.spatial.transform import Rotation
 
 # --- pure helpers ------------------------------------------------------------------------
@@ -164,25 +170,26 @@ class SynthesizedGrasp:
 
 
 def _constraint(client: int, uid: int) -> tuple[list[float], list[float], float]:
-    info = p.getConstraintInfo(uid, physicsClientId=client)
-    return list(info[7]), list(info[9]), float(info[10])
+    info = get_constraint_info(client, uid)
+    return (list(info.joint_pivot_in_child), list(info.joint_frame_orientation_child),
+            float(info.max_applied_force))
 
 
 def capture_grasp(scene) -> SynthesizedGrasp:
     """Saves the present state (the end of synthesis) and what a restore cannot recover."""
     cid, hand = scene.client, scene.hand
     frame_position, frame_rotation = hand.frame_pose()
-    dynamics = p.getDynamicsInfo(scene.object_body, -1, physicsClientId=cid)
+    dynamics = get_dynamics_info(cid, scene.object_body)
     return SynthesizedGrasp(
-        state=p.saveState(physicsClientId=cid),
+        state=save_state(cid),
         commands=dict(hand.commands),
         effort=float(hand.effort),
         drive=_constraint(cid, scene.drive_constraint),
         fixture=_constraint(cid, scene.fixture_constraint),
-        friction=float(dynamics[1]),
+        friction=float(dynamics.lateral_friction),
         frame_position=frame_position,
         frame_rotation=frame_rotation,
-        mass_kg=float(dynamics[0]),
+        mass_kg=float(dynamics.mass),
     )
 
 
@@ -197,9 +204,7 @@ def restore_grasp(evaluator, grasp: SynthesizedGrasp, *, effort: float | None = 
     `effort`, the fingers' forces scaled to that closing effort), drive and fixture
     constraints, zero gravity and the object's own friction."""
     scene, cid = evaluator.scene, evaluator.client
-    p.restoreState(evaluator.pristine, physicsClientId=cid)
-    p.performCollisionDetection(physicsClientId=cid)
-    p.restoreState(grasp.state, physicsClientId=cid)
+    restore_state_clean(cid, grasp.state, contact_free=evaluator.pristine)
     scene.hand.commands = dict(grasp.commands)
     scene.hand.effort = grasp.effort
     scene.hand.reissue(effort)

@@ -8,6 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
+from graspscape.workers.sim.bullet import (
+    ContactPoint,
+    get_contact_points,
+    get_pose,
+    matrix_from_quat,
+)
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.gripper.hand import Hand
 
@@ -40,18 +46,19 @@ class Scene:
         return bool(self.contacts())
 
     def palm_in_contact(self) -> bool:
-        return any(c[3] == -1 for c in self.contacts())
+        return any(c.link_index_a == -1 for c in self.contacts())
 
     def touching_links(self) -> frozenset[int]:
         """Indices of the hand's links that touch the object (the palm is -1)."""
-        return frozenset(c[3] for c in self.contacts())
+        return frozenset(c.link_index_a for c in self.contacts())
 
-    def contacts(self) -> list:
+    def contacts(self) -> list[ContactPoint]:
+        """The hand's contact points with the object (A: the hand, B: the object)."""
         # pybullet also reports pairs still apart by up to its breaking threshold; only
         # touching pairs are contacts here.
-        points = p.getContactPoints(self.hand.body, self.object_body, physicsClientId=self.client)
-        return [c for c in points if c[8] <= CONTACT_DISTANCE_M]
+        points = get_contact_points(self.client, self.hand.body, self.object_body)
+        return [c for c in points if c.contact_distance <= CONTACT_DISTANCE_M]
 
     def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        pos, orn = p.getBasePositionAndOrientation(self.object_body, physicsClientId=self.client)
-        return np.array(pos), np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+        pos, orn = get_pose(self.client, self.object_body)
+        return np.array(pos), matrix_from_quat(orn)

@@ -34,6 +34,13 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 from graspscape.shared.specs.sim import MetricSettings
+from graspscape.workers.sim.bullet import (
+    get_point,
+    get_pose,
+    matrix_from_quat,
+    restore_state_clean,
+    saved_state,
+)
 from graspscape.workers.sim.geometry import axis_rotation, rotation_vector
 from graspscape.workers.sim.metric import deviation_matrix, instant_quality_of_deviation
 
@@ -49,7 +56,7 @@ class ProbeContext:
     drive: DriveFn  # sets the drive constraint's target (gripper frame position, rotation)
     target: TargetFn  # reference gripper frame pose at a step index
     # A saved state in which nothing touches (the evaluator's pristine one); see restore_clean.
-    contact_free_state: int | None = None
+    contact_free_state: int
 
 
 def restore_clean(ctx: ProbeContext, state: int) -> None:
@@ -61,11 +68,7 @@ def restore_clean(ctx: ProbeContext, state: int) -> None:
     state differ. Passing through a contact-free state drops every manifold, so each rollout
     starts from the same (empty) cache and repeats exactly, whatever ran before it.
     """
-    cid = ctx.client
-    if ctx.contact_free_state is not None:
-        p.restoreState(ctx.contact_free_state, physicsClientId=cid)
-        p.performCollisionDetection(physicsClientId=cid)
-    p.restoreState(state, physicsClientId=cid)
+    restore_state_clean(ctx.client, state, contact_free=ctx.contact_free_state)
 
 
 @dataclass(frozen=True)
@@ -79,25 +82,19 @@ class Snapshot:
     relative_offset: np.ndarray
 
 
-def _rotation(orn) -> np.ndarray:
-    return np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
-
-
 def anchor_point(ctx: ProbeContext) -> np.ndarray:
     """The anchor of the instant the simulation is at now, in the base's COM frame."""
-    cid = ctx.client
-    com, orn = p.getBasePositionAndOrientation(ctx.hand_body, physicsClientId=cid)
-    pivot = p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)[0]
-    return _rotation(orn).T @ (np.array(pivot) - np.array(com))
+    com, orn = get_pose(ctx.client, ctx.hand_body)
+    pivot = get_point(ctx.client, ctx.object_body)
+    return matrix_from_quat(orn).T @ (np.array(pivot) - np.array(com))
 
 
 def snapshot(ctx: ProbeContext, anchor_local: np.ndarray) -> Snapshot:
-    cid = ctx.client
-    com, orn = p.getBasePositionAndOrientation(ctx.hand_body, physicsClientId=cid)
-    o_pos, o_orn = p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)
-    rot = _rotation(orn)
+    com, orn = get_pose(ctx.client, ctx.hand_body)
+    o_pos, o_orn = get_pose(ctx.client, ctx.object_body)
+    rot = matrix_from_quat(orn)
     anchor = np.array(com) + rot @ anchor_local
-    return Snapshot(anchor=anchor, base_rotation=rot, object_rotation=_rotation(o_orn),
+    return Snapshot(anchor=anchor, base_rotation=rot, object_rotation=matrix_from_quat(o_orn),
                     relative_offset=np.array(o_pos) - anchor)
 
 
@@ -128,17 +125,17 @@ def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSetting
     With `metric.differences == "central"`, ±ε rollouts instead of +ε and an unperturbed one:
     the perturbation's even-order effects cancel (12 rollouts instead of 7).
     """
+    if state is None:
+        with saved_state(ctx.client, restore=False) as own:  # restored below, cleanly
+            return probe_instant(ctx, step, dt, metric, length, state=own)
     cid = ctx.client
     window = metric.window_steps
     central = metric.differences == "central"
     linear = metric.perturbation_m_s2
     angular = metric.angular_perturbation_rad_s2
-    own_state = state is None
-    if own_state:
-        state = p.saveState(physicsClientId=cid)
     restore_clean(ctx, state)
     anchor_local = anchor_point(ctx)
-    pivot = np.array(p.getBasePositionAndOrientation(ctx.object_body, physicsClientId=cid)[0])
+    pivot = np.array(get_point(cid, ctx.object_body))
 
     def rollout(axis: int | None, sign: float = 1.0) -> Snapshot:
         restore_clean(ctx, state)
@@ -168,6 +165,4 @@ def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSetting
             d_base[:, axis], d_rel[:, axis] = responses(rollout(axis), reference)
     finally:
         restore_clean(ctx, state)
-        if own_state:
-            p.removeState(state, physicsClientId=cid)
     return instant_quality_of_deviation(deviation_matrix(d_base, d_rel, length))

@@ -13,6 +13,7 @@ from graspscape.shared.specs.sim import BaselinePolicySettings, SimSettings
 from graspscape.workers.sim.effort import minimum_closing_effort, search_closing_effort
 from graspscape.workers.sim.grasp_metrics import (
     Contact,
+    LinkPoint,
     grasp_matrix,
     gws_volume,
     merge_by_link,
@@ -103,8 +104,8 @@ def test_mu_m_scales_with_contact_force_and_is_relative_to_weight():
 
 def test_manifold_points_of_one_link_merge_into_one_contact():
     n = np.array([0.0, 0.0, -1.0])
-    points = [("A_1", np.array([0.01, 0.0, R]), n, 1.0, 0.5),
-              ("A_1", np.array([-0.01, 0.0, R]), n, 3.0, 0.5)]
+    points = [LinkPoint("A_1", np.array([0.01, 0.0, R]), n, 1.0, 0.5),
+              LinkPoint("A_1", np.array([-0.01, 0.0, R]), n, 3.0, 0.5)]
     merged = merge_by_link(points)
     assert len(merged) == 1
     np.testing.assert_allclose(merged[0].position, [-0.005, 0.0, R])

@@ -11,6 +11,7 @@ from graspscape.shared.specs.gripper import list_grippers, load_gripper
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import PhaseTimes
 from graspscape.shared.specs.sim import PhysicsSettings, SimSettings
+from graspscape.workers.sim.bullet import get_joint_state
 from graspscape.workers.sim.gripper.hand import Hand
 from graspscape.workers.sim.gripper.urdf import gripper_urdf
 
@@ -75,13 +76,13 @@ def test_a_blocked_phalanx_pushes_with_its_full_share_of_the_closing_effort(make
     assert evaluator.policy.synthesize(scene, position, rotation, target, settings,
                                        PhaseTimes()) is None
     scene.step()
-    touching = {c[3] for c in scene.contacts()}
+    touching = {c.link_index_a for c in scene.contacts()}
     pushing = 0
     for finger in hand.fingers:
         for k in range(finger.active):
             if finger.joints[k] in touching:
-                torque = p.getJointState(hand.body, finger.joints[k],
-                                         physicsClientId=scene.client)[3]
+                torque = get_joint_state(scene.client, hand.body,
+                                         finger.joints[k]).applied_joint_motor_torque
                 assert torque == pytest.approx(hand.effort * finger.shares[k], rel=0.01)
                 pushing += 1
     assert pushing >= 3

@@ -11,6 +11,7 @@ from graspscape.shared.specs.haptic import HapticPolicySettings
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import Outcome
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.bullet import get_joint_states, get_pose, restore_state, saved_state
 from graspscape.workers.sim.compare_policies import on_mug_handle
 from graspscape.workers.sim.policies import list_policies
 from graspscape.workers.sim.policies.haptic import (
@@ -64,10 +65,10 @@ def test_same_pose_same_result_even_with_sensor_noise(make_evaluator):
 
 def _hand_state(evaluator) -> np.ndarray:
     hand, cid = evaluator.scene.hand, evaluator.client
-    pos, orn = p.getBasePositionAndOrientation(hand.body, physicsClientId=cid)
+    pos, orn = get_pose(cid, hand.body)
     lin, ang = p.getBaseVelocity(hand.body, physicsClientId=cid)
-    joints = [v for s in p.getJointStates(hand.body, hand.movable, physicsClientId=cid)
-              for v in s[:2]]
+    joints = [v for s in get_joint_states(cid, hand.body, hand.movable)
+              for v in (s.joint_position, s.joint_velocity)]
     return np.array([*pos, *orn, *lin, *ang, *joints])
 
 
@@ -81,23 +82,22 @@ def test_jacobian_probes_leave_the_simulation_untouched(haptic_sphere):
     hand.begin_closing(6.0)
     for _ in range(15):
         ev.scene.step()
-    saved = p.saveState(physicsClientId=ev.client)
     runs = []
-    for probe in (False, True):
-        p.restoreState(saved, physicsClientId=ev.client)
-        hand.begin_closing(6.0)
-        if probe:
-            sensors = ProximitySensors(ev.scene, HAPTIC.haptic, seed=0)
-            jac = np.hstack([base_jacobian(sensors, 0.002, 0.02),
-                             joint_jacobian(sensors, hand.finger_joints, 0.01)])
-            # The probes saw the hand move: distances change with the base and the joints.
-            assert np.abs(jac[:, :6]).max() > 0.1 and np.abs(jac[:, 6:]).max() > 0.01
-        trace = []
-        for _ in range(30):
-            ev.scene.step()
-            trace.append(_hand_state(ev))
-        runs.append(np.array(trace))
-    p.removeState(saved, physicsClientId=ev.client)
+    with saved_state(ev.client) as saved:
+        for probe in (False, True):
+            restore_state(ev.client, saved)
+            hand.begin_closing(6.0)
+            if probe:
+                sensors = ProximitySensors(ev.scene, HAPTIC.haptic, seed=0)
+                jac = np.hstack([base_jacobian(sensors, 0.002, 0.02),
+                                 joint_jacobian(sensors, hand.finger_joints, 0.01)])
+                # The probes saw the hand move: distances change with the base and the joints.
+                assert np.abs(jac[:, :6]).max() > 0.1 and np.abs(jac[:, 6:]).max() > 0.01
+            trace = []
+            for _ in range(30):
+                ev.scene.step()
+                trace.append(_hand_state(ev))
+            runs.append(np.array(trace))
     np.testing.assert_array_equal(runs[0], runs[1])
 
 

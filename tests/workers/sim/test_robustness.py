@@ -13,6 +13,7 @@ import pytest
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import Outcome, RobustnessReport
 from graspscape.shared.specs.robustness import TEST_NAMES, RobustnessSettings
+from graspscape.workers.sim.bullet import get_pose, matrix_from_quat
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.robustness import (
     directions,
@@ -131,8 +132,8 @@ def _weld(evaluator) -> int:
     """Welds the object to the palm where it is (maxForce 1e5, as test_metric does)."""
     scene, cid = evaluator.scene, evaluator.client
     obj_pos, obj_rot = scene.object_pose()
-    com, orn = p.getBasePositionAndOrientation(scene.hand.body, physicsClientId=cid)
-    rot = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+    com, orn = get_pose(cid, scene.hand.body)
+    rot = matrix_from_quat(orn)
     weld = p.createConstraint(scene.hand.body, -1, scene.object_body, -1, p.JOINT_FIXED,
                               [0, 0, 0], (rot.T @ (obj_pos - np.array(com))).tolist(), [0, 0, 0],
                               parentFrameOrientation=quat_from_matrix(rot.T @ obj_rot),

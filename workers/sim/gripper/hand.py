@@ -18,6 +18,15 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 from graspscape.shared.specs.gripper import GripperSpec
+from graspscape.workers.sim.bullet import (
+    get_dynamics_info,
+    get_joint_info,
+    get_joint_positions,
+    get_joint_states,
+    get_num_joints,
+    get_pose,
+    matrix_from_quat,
+)
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.gripper.urdf import write_gripper_urdf
 
@@ -53,13 +62,14 @@ class Hand:
                                flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
         self.link_names: dict[int, str] = {-1: "palm"}
         joint_by_name: dict[str, int] = {}
-        for j in range(p.getNumJoints(self.body, physicsClientId=client)):
-            info = p.getJointInfo(self.body, j, physicsClientId=client)
-            self.link_names[j] = info[12].decode()
-            joint_by_name[info[1].decode()] = j
+        infos = [get_joint_info(client, self.body, j)
+                 for j in range(get_num_joints(client, self.body))]
+        for j, info in enumerate(infos):
+            self.link_names[j] = info.link_name.decode()
+            joint_by_name[info.joint_name.decode()] = j
         self.joint_by_name = joint_by_name
         self.movable = [j for j in joint_by_name.values()
-                        if p.getJointInfo(self.body, j, physicsClientId=client)[2] != p.JOINT_FIXED]
+                        if infos[j].joint_type != p.JOINT_FIXED]
         self.fingers: list[FingerJoints] = []
         for finger in spec.fingers:
             self.fingers.append(FingerJoints(
@@ -72,12 +82,12 @@ class Hand:
                 shares=[ph.torque_share for ph in finger.phalanges],
             ))
         self.finger_joints = [j for f in self.fingers for j in f.joints]
-        self.mass = sum(p.getDynamicsInfo(self.body, link, physicsClientId=client)[0]
+        self.mass = sum(get_dynamics_info(client, self.body, link).mass
                         for link in self.link_names)
         # pybullet reports the base pose as the palm's centre-of-mass frame; the gripper frame
         # (palm surface centre) sits at this offset from it.
         self.base_inertial_offset = np.array(
-            p.getDynamicsInfo(self.body, -1, physicsClientId=client)[3])
+            get_dynamics_info(client, self.body).local_inertial_pos)
         # The trap: default velocity motors lock every joint until switched off.
         p.setJointMotorControlArray(self.body, self.movable, p.VELOCITY_CONTROL,
                                     forces=[0.0] * len(self.movable), physicsClientId=client)
@@ -94,8 +104,8 @@ class Hand:
         return com.tolist(), quat_from_matrix(frame_rot)
 
     def frame_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-        rot = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+        pos, orn = get_pose(self.client, self.body)
+        rot = matrix_from_quat(orn)
         return np.array(pos) - rot @ self.base_inertial_offset, rot
 
     # --- joints ------------------------------------------------------------------------
@@ -187,8 +197,7 @@ class Hand:
             self._close(finger, 0, speed)
 
     def finger_angles(self, finger: FingerJoints) -> list[float]:
-        states = p.getJointStates(self.body, finger.joints, physicsClientId=self.client)
-        return [s[0] for s in states]
+        return get_joint_positions(self.client, self.body, finger.joints)
 
     def update_closing(self, stall_tolerance: float,
                        touching: frozenset[int] = frozenset()) -> bool:
@@ -216,11 +225,11 @@ class Hand:
     def joint_angles(self) -> dict[str, float]:
         joints = sorted(self.joint_by_name.items(), key=lambda kv: kv[1])
         movable = [(name, j) for name, j in joints if j in self.movable]
-        states = p.getJointStates(self.body, [j for _, j in movable], physicsClientId=self.client)
-        return {name.removesuffix("_joint"): float(s[0])
-                for (name, _), s in zip(movable, states, strict=True)}
+        angles = get_joint_positions(self.client, self.body, [j for _, j in movable])
+        return {name.removesuffix("_joint"): float(q)
+                for (name, _), q in zip(movable, angles, strict=True)}
 
     def max_finger_torque(self) -> float:
-        states = p.getJointStates(self.body, self.finger_joints, physicsClientId=self.client)
-        return max(abs(s[3]) for s in states)
+        states = get_joint_states(self.client, self.body, self.finger_joints)
+        return max(abs(s.applied_joint_motor_torque) for s in states)
 

@@ -40,6 +40,13 @@ import pybullet as p
 from graspscape.shared.specs.haptic import HapticPolicySettings
 from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.bullet import (
+    get_closest_points,
+    get_joint_info,
+    get_joint_positions,
+    get_joint_state,
+    saved_state,
+)
 from graspscape.workers.sim.policies.closing import close_fingers
 from scipy.spatial.transform import Rotation
 
@@ -58,9 +65,9 @@ class ProximitySensors:
         self.index = {link: i for i, link in enumerate(self.links)}
 
     def _distance(self, link: int) -> float:
-        points = p.getClosestPoints(self.hand.body, self.scene.object_body, self.range,
-                                    linkIndexA=link, physicsClientId=self.client)
-        return min((pt[8] for pt in points), default=self.range)
+        points = get_closest_points(self.client, self.hand.body, self.scene.object_body,
+                                    self.range, link_a=link)
+        return min((pt.contact_distance for pt in points), default=self.range)
 
     def exact(self, links: list[int] | None = None) -> np.ndarray:
         return np.array([self._distance(link) for link in (links or self.links)])
@@ -72,18 +79,21 @@ class ProximitySensors:
         return np.minimum(distances, self.range)
 
 
-class JointState:
+class JointSnapshot:
     """Exact positions and velocities of the hand's joints, to put back after a probe
     (resetJointState restores them bit for bit; a test checks the rollout is unchanged)."""
 
     def __init__(self, hand) -> None:
         self.hand = hand
-        self.joints = {j: p.getJointState(hand.body, j, physicsClientId=hand.client)[:2]
-                       for j in hand.movable}
+        self.joints = {j: get_joint_state(hand.client, hand.body, j) for j in hand.movable}
+
+    def position(self, joint: int) -> float:
+        return self.joints[joint].joint_position
 
     def restore(self, joint: int) -> None:
-        q, qd = self.joints[joint]
-        p.resetJointState(self.hand.body, joint, q, qd, physicsClientId=self.hand.client)
+        state = self.joints[joint]
+        p.resetJointState(self.hand.body, joint, state.joint_position, state.joint_velocity,
+                          physicsClientId=self.hand.client)
 
 
 def _descendants(hand) -> dict[int, list[int]]:
@@ -98,13 +108,13 @@ def _descendants(hand) -> dict[int, list[int]]:
 def joint_jacobian(sensors: ProximitySensors, joints: list[int], step: float) -> np.ndarray:
     """∂d/∂θ (rows: sensing links, columns: joints) by forward differences."""
     hand = sensors.hand
-    state = JointState(hand)
+    state = JointSnapshot(hand)
     moved = _descendants(hand)
     base = sensors.exact()
     jac = np.zeros((len(sensors.links), len(joints)))
     for col, joint in enumerate(joints):
-        q = state.joints[joint][0]
-        upper = p.getJointInfo(hand.body, joint, physicsClientId=hand.client)[9]
+        q = state.position(joint)
+        upper = get_joint_info(hand.client, hand.body, joint).joint_upper_limit
         # Step inward unless that leaves the joint range (then outward): the model stays valid.
         h = step if q + step <= upper else -step
         p.resetJointState(hand.body, joint, q + h, 0.0, physicsClientId=hand.client)
@@ -124,23 +134,21 @@ def base_jacobian(sensors: ProximitySensors, step_m: float, step_rad: float) -> 
     # Putting the base back with resetBasePositionAndOrientation is off by ~1e-13 (pybullet
     # converts between the link and inertial frames), enough to change a later contact-rich
     # rollout: the whole state is saved and restored instead (~1 ms).
-    saved = p.saveState(physicsClientId=hand.client)
-    base = sensors.exact()
-    frame_pos, frame_rot = hand.frame_pose()
-    jac = np.zeros((len(sensors.links), 6))
-    for col in range(6):
-        axis = np.zeros(3)
-        axis[col % 3] = 1.0
-        if col < 3:
-            pos, rot, h = frame_pos + axis * step_m, frame_rot, step_m
-        else:
-            turn = Rotation.from_rotvec(axis * step_rad).as_matrix()
-            pos, rot, h = frame_pos, turn @ frame_rot, step_rad
-        com, orn = hand.com_pose_for(pos, rot)
-        p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=hand.client)
-        jac[:, col] = (sensors.exact() - base) / h
-    p.restoreState(saved, physicsClientId=hand.client)
-    p.removeState(saved, physicsClientId=hand.client)
+    with saved_state(hand.client):
+        base = sensors.exact()
+        frame_pos, frame_rot = hand.frame_pose()
+        jac = np.zeros((len(sensors.links), 6))
+        for col in range(6):
+            axis = np.zeros(3)
+            axis[col % 3] = 1.0
+            if col < 3:
+                pos, rot, h = frame_pos + axis * step_m, frame_rot, step_m
+            else:
+                turn = Rotation.from_rotvec(axis * step_rad).as_matrix()
+                pos, rot, h = frame_pos, turn @ frame_rot, step_rad
+            com, orn = hand.com_pose_for(pos, rot)
+            p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=hand.client)
+            jac[:, col] = (sensors.exact() - base) / h
     return jac
 
 
@@ -167,12 +175,11 @@ class HapticPolicy:
         key = np.round(np.concatenate([position, rotation.ravel()]), 9).tobytes()
         sensors = ProximitySensors(scene, cfg, zlib.crc32(key) ^ cfg.noise_seed)
         joints = list(hand.finger_joints)
-        limits = np.array([p.getJointInfo(hand.body, j, physicsClientId=cid)[8:10]
-                           for j in joints])
+        infos = [get_joint_info(cid, hand.body, j) for j in joints]
+        limits = np.array([(info.joint_lower_limit, info.joint_upper_limit) for info in infos])
 
         def angles() -> np.ndarray:
-            return np.array([s[0] for s in p.getJointStates(hand.body, joints,
-                                                            physicsClientId=cid)])
+            return np.array(get_joint_positions(cid, hand.body, joints))
 
         def command_joints(values: np.ndarray, force: float) -> None:
             hand.hold_positions(joints, values.tolist(), force)
