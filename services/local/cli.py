@@ -32,6 +32,8 @@ def _explore(args: argparse.Namespace) -> int:
         "data_dir": args.data_dir,
         "mass_kg": args.mass,
         "friction": args.friction,
+        "scale": args.scale,
+        "units": args.units,
         "robustness": None if args.robustness is None else tuple(
             t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
         "quiet": args.quiet,
@@ -71,6 +73,9 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
     )
     explore.add_argument("--mass", type=float, help="object mass, kg")
     explore.add_argument("--friction", type=float, help="object friction coefficient")
+    explore.add_argument("--scale", type=float, help="uniform object scale (default 1)")
+    explore.add_argument("--units", choices=["m", "cm", "mm"],
+                         help="length unit of a mesh file (default m)")
     explore.add_argument(
         "--robustness", metavar="TESTS",
         help="robustness tests run on every held pose, comma-separated "

@@ -44,6 +44,7 @@ from graspscape.services.coordinator.store.queue import retry_failed_tiles
 from graspscape.services.local.compose import open_store, store_object, wire
 from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_LEVELS, DEFAULT_R
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
+from graspscape.shared.specs.objects import LengthUnit
 from graspscape.shared.specs.robustness import TestName
 from graspscape.workers.runtime.config import WorkerConfig, default_procs
 from graspscape.workers.runtime.supervisor import Supervisor
@@ -65,6 +66,8 @@ class ExploreOptions(BaseModel):
     data_dir: Path = Path("data")
     mass_kg: float | None = None
     friction: float | None = None
+    scale: float | None = None
+    units: LengthUnit | None = None
     robustness: tuple[TestName, ...] | None = Field(
         default=None, description="robustness tests on every held pose; None: the spec's default")
     quiet: bool = False
@@ -184,7 +187,7 @@ def run_explore(opts: ExploreOptions) -> int:
             "robustness": sim.robustness.model_copy(update={"tests": opts.robustness})})})
     with sessions() as session:
         object_id = store_object(session, opts.object, mass_kg=opts.mass_kg,
-                                 friction=opts.friction)
+                                 friction=opts.friction, scale=opts.scale, units=opts.units)
         spec = spec.model_copy(update={"object_id": object_id})
         exploration_id, resumed, retried = _exploration(session, spec, settings)
         # Every worker of this command starts now, so any lease still held is an orphan of
