@@ -8,19 +8,17 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Path, Query, Response, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
+from graspscape.services.coordinator.api.pages import CursorPage, Page
 from graspscape.services.coordinator.api.responses import UNAUTHORIZED, error
 from graspscape.services.coordinator.exploration import service
 from graspscape.services.coordinator.exploration.schemas import (
     ExplorationCreated,
     ExplorationDetail,
     ExplorationOut,
-    ExplorationPage,
     ExplorationRetried,
     FailedTileOut,
-    FailurePage,
     PoseFilter,
     PoseOut,
-    PosePage,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
 
@@ -58,7 +56,7 @@ def submit(spec: ExplorationSpec, session: SessionDep, settings: SettingsDep) ->
     )
 
 
-@router.get("/explorations", response_model=ExplorationPage, summary="List explorations")
+@router.get("/explorations", response_model=Page[ExplorationOut], summary="List explorations")
 def list_explorations(
     session: SessionDep,
     status_: Annotated[
@@ -72,12 +70,7 @@ def list_explorations(
     rows, total = service.list_explorations(
         session, status=status_, object_id=object_id, limit=limit, offset=offset
     )
-    return ExplorationPage(
-        items=[ExplorationOut.model_validate(r) for r in rows],
-        total=total,
-        limit=limit,
-        offset=offset,
-    )
+    return Page[ExplorationOut](items=rows, total=total, limit=limit, offset=offset)
 
 
 @router.get(
@@ -98,7 +91,7 @@ def get_exploration(exploration_id: Id, session: SessionDep, settings: SettingsD
 
 @router.get(
     "/explorations/{exploration_id}/failures",
-    response_model=FailurePage,
+    response_model=Page[FailedTileOut],
     responses=_NOT_FOUND,
     summary="Its failed tiles (after max_attempts), with attempts and the last error",
 )
@@ -111,10 +104,7 @@ def list_failures(
     rows, total = service.list_failures(
         session, exploration_id=exploration_id, limit=limit, offset=offset
     )
-    return FailurePage(
-        items=[FailedTileOut.model_validate(r) for r in rows], total=total, limit=limit,
-        offset=offset,
-    )
+    return Page[FailedTileOut](items=rows, total=total, limit=limit, offset=offset)
 
 
 @router.post(
@@ -162,7 +152,7 @@ def delete(exploration_id: Id, session: SessionDep) -> Response:
 
 @router.get(
     "/explorations/{exploration_id}/poses",
-    response_model=PosePage,
+    response_model=CursorPage[PoseOut],
     responses={**_NOT_FOUND, 422: {"description": "bad filter (detail names it)"}},
     summary="Evaluated poses, oldest first, keyset-paginated, with filters",
 )
@@ -197,6 +187,4 @@ def list_poses(
     rows, next_cursor = service.list_poses(
         session, exploration_id=exploration_id, filters=filters, limit=limit, cursor=cursor
     )
-    return PosePage(
-        items=[PoseOut.model_validate(r) for r in rows], limit=limit, next_cursor=next_cursor
-    )
+    return CursorPage[PoseOut](items=rows, limit=limit, next_cursor=next_cursor)

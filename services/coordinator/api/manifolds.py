@@ -34,6 +34,11 @@ class ManifoldList(BaseModel):
     manifolds: list[ManifoldSummary]
 
 
+class ManifoldTable(ManifoldList):
+    table: list[dict[str, Any]] = Field(description="one short row per manifold (the docs' "
+                                        "table): label, description, poses, μs, best key")
+
+
 class BestOut(BaseModel):
     exploration_id: int
     manifold: str | None
@@ -116,7 +121,7 @@ def best(
         max_effort_nm=max_effort_nm, limit=limit, rank=rank,
     )
     return BestOut(exploration_id=exploration_id, manifold=manifold,
-                   poses=[PoseOut.model_validate(r) for r in rows])
+                   poses=rows)
 
 
 def _picture(exploration_id: int, session: Any, fmt: Literal["png", "svg"], cut: str,
@@ -188,13 +193,8 @@ def export_parquet(exploration_id: Id, session: SessionDep) -> Response:
 
 
 @router.get("/explorations/{exploration_id}/export/manifolds.json",
-            responses=_NOT_FOUND, summary="The manifold table (summaries and short rows), JSON")
+            response_model=ManifoldTable, responses=_NOT_FOUND,
+            summary="The manifold table (summaries and short rows), JSON")
 def export_manifolds(exploration_id: Id, session: SessionDep) -> Any:
-    manifolds.ensure_manifolds(session, exploration_id)
-    items = manifolds.stored_manifolds(session, exploration_id)
-    return {
-        "exploration_id": exploration_id,
-        "final": manifolds.is_final(session, exploration_id),
-        "table": table_rows_of(items),
-        "manifolds": [m.model_dump(mode="json") for m in items],
-    }
+    listed = list_manifolds(exploration_id, session)
+    return ManifoldTable(**dict(listed), table=table_rows_of(listed.manifolds))

@@ -9,10 +9,11 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
+from graspscape.services.coordinator.api.pages import Page
 from graspscape.services.coordinator.api.responses import NOT_FOUND, UNAUTHORIZED, error
 from graspscape.services.coordinator.errors import InvalidInput, PayloadTooLarge
 from graspscape.services.coordinator.objects import service
-from graspscape.services.coordinator.objects.schemas import ObjectOut, ObjectPage
+from graspscape.services.coordinator.objects.schemas import ObjectOut
 
 router = APIRouter(tags=["objects"], route_class=FiniteJSONRoute)
 
@@ -129,16 +130,14 @@ def create_object(
     return row
 
 
-@router.get("/objects", response_model=ObjectPage, summary="List stored objects")
+@router.get("/objects", response_model=Page[ObjectOut], summary="List stored objects")
 def list_objects(
     session: SessionDep,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=2**31 - 1)] = 0,
 ) -> Any:
     rows, total = service.list_objects(session, limit=limit, offset=offset)
-    return ObjectPage(
-        items=[ObjectOut.model_validate(r) for r in rows], total=total, limit=limit, offset=offset
-    )
+    return Page[ObjectOut](items=rows, total=total, limit=limit, offset=offset)
 
 
 @router.get(

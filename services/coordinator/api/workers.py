@@ -8,6 +8,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query
 from graspscape.services.coordinator.api.deps import SessionDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
+from graspscape.services.coordinator.api.pages import Page
 from graspscape.services.coordinator.store.workers import list_workers
 from pydantic import BaseModel, ConfigDict
 
@@ -24,20 +25,11 @@ class WorkerOut(BaseModel):
     last_seen: datetime
 
 
-class WorkerPage(BaseModel):
-    items: list[WorkerOut]
-    total: int
-    limit: int
-    offset: int
-
-
-@router.get("/workers", response_model=WorkerPage, summary="Workers seen, most recent first")
+@router.get("/workers", response_model=Page[WorkerOut], summary="Workers seen, most recent first")
 def get_workers(
     session: SessionDep,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0, le=2**31 - 1)] = 0,
 ) -> Any:
     rows, total = list_workers(session, limit=limit, offset=offset)
-    return WorkerPage(
-        items=[WorkerOut.model_validate(r) for r in rows], total=total, limit=limit, offset=offset
-    )
+    return Page[WorkerOut](items=rows, total=total, limit=limit, offset=offset)

@@ -67,24 +67,10 @@ class FailedTileOut(BaseModel):
     updated_at: datetime
 
 
-class FailurePage(BaseModel):
-    items: list[FailedTileOut]
-    total: int
-    limit: int
-    offset: int
-
-
 class ExplorationRetried(BaseModel):
     id: int
     status: str
     tiles_requeued: int
-
-
-class ExplorationPage(BaseModel):
-    items: list[ExplorationOut]
-    total: int
-    limit: int
-    offset: int
 
 
 class ExplorationCreated(BaseModel):
@@ -94,23 +80,30 @@ class ExplorationCreated(BaseModel):
     poses_total: int
 
 
-class PoseOut(BaseModel):
+class PoseValues(BaseModel):
+    """Where a pose is and its headline result: the one pose shape that every pose the API
+    returns carries (`PoseOut`, a stored pose in full, in /poses and /best; `PoseBrief`, a
+    manifold's best pose and local maxima, in the manifold routes and the table export)."""
+
+    theta: float = Field(description="polar angle of the approach direction from +z, rad")
+    phi: float = Field(description="azimuth of the approach direction, rad")
+    r: float = Field(description="start gap between palm and object surface, m")
+    roll: float = Field(description="roll about the palm normal, rad")
+    pitch: float
+    yaw: float
+    mu_s: float = Field(description="the simulated grasp's μs (0 where it failed)")
+    effort_max_nm: float = Field(description="largest joint effort of the grasp, N·m")
+
+
+class PoseOut(PoseValues):
     model_config = ConfigDict(from_attributes=True)
 
     id: int
     pose_key: str
     tile_id: int | None
-    theta: float
-    phi: float
-    r: float
-    roll: float
-    pitch: float
-    yaw: float
     outcome: str
     viable: bool
-    mu_s: float
     effective_r: float | None
-    effort_max_nm: float
     contacts_per_link: dict[str, Any] | None
     signature: dict[str, Any] | None
     grasp: dict[str, Any] | None
@@ -137,12 +130,6 @@ class PoseOut(BaseModel):
         default=None, description="pull along the approach axis at which the object slips, N")
     shake_survival_s: float | None = Field(
         default=None, description="time into the shake at which the object falls off, s")
-
-
-class PosePage(BaseModel):
-    items: list[PoseOut]
-    limit: int
-    next_cursor: int | None = Field(description="pass as ?cursor= for the next page; null at end")
 
 
 class PoseFilter(BaseModel):

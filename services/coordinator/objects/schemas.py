@@ -39,10 +39,3 @@ class ObjectOut(BaseModel):
         warnings = stored.pop("warnings", [])
         out = {c: getattr(data, c) for c in _COLUMNS}
         return {**out, "mesh_info": stored or None, "warnings": warnings}
-
-
-class ObjectPage(BaseModel):
-    items: list[ObjectOut]
-    total: int
-    limit: int
-    offset: int

@@ -141,7 +141,8 @@ def test_the_running_app_sweeps_expired_leases(
     sessions: sessionmaker[Session],  # type: ignore[no-untyped-def]
 ) -> None:
 
-    fast = settings.model_copy(update={"requeue_interval_s": 0.1})
+    fast = settings.model_copy(
+        update={"queue": settings.queue.model_copy(update={"requeue_interval_s": 0.1})})
     with TestClient(create_app(fast)) as client:
         object_id = client.post("/objects", data={"name": "cube"}).json()["id"]
         eid = client.post(
