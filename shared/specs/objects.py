@@ -1,8 +1,9 @@
 """What an object to be grasped is, as users and the wire describe it.
 
 An object is named (a built-in shape, a pybullet_data mesh or a YCB folder entry) or given as
-a mesh file, with its physical properties. Workers turn it into a pybullet body; the
-coordinator stores it by the content hash of its mesh.
+a mesh file or a URDF, with its physical properties; shared/specs/object_checks.py validates
+it. Workers turn it into a pybullet body; the coordinator stores it by the content hash of
+its mesh.
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ class ObjectSpec(BaseModel):
         ),
     )
     mesh_path: str | None = Field(
-        default=None, description="mesh file (OBJ, STL, PLY, GLB) in metres"
+        default=None,
+        description="mesh file (OBJ, STL, PLY, GLB; in metres unless `units`), or a one-link "
+        "URDF whose mass, friction and mesh scale are kept",
     )
     mass_kg: float | None = Field(
         default=None, gt=0.0, le=50.0, description="mass; default: the named object's own"
