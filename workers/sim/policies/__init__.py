@@ -1,49 +1,20 @@
-"""Grasp synthesis policies, chosen by name. A policy drives the scene from the start pose
-until a grasp has formed (return None) or clearly cannot (return the outcome).
+"""Grasp synthesis policies, chosen by name (`SimSettings.policy_name`). A policy drives the
+scene from the start pose until a grasp has formed or clearly cannot (`registry.Policy`).
 
-Every module in this package that defines `POLICY` (a class with a `name` and `synthesize`)
-is a policy: adding one is adding one module.
+A policy is a class decorated with `@register_policy("name")` (registry.py) in a module of this
+package; the imports below register them. Adding one is adding its module and its import
+here, and its name to `shared/specs/sim.py`'s `POLICY_NAMES` (the coordinator validates
+specs against that list without loading the simulation; a test keeps the two equal).
 """
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
-from functools import cache
-from typing import TYPE_CHECKING, Protocol
+from graspscape.workers.sim.policies import baseline, haptic  # noqa: F401 (they register)
+from graspscape.workers.sim.policies.registry import (
+    Policy,
+    get_policy,
+    list_policies,
+    register_policy,
+)
 
-import numpy as np
-from graspscape.shared.specs.results import Outcome, PhaseTimes
-
-if TYPE_CHECKING:
-    from graspscape.shared.specs.sim import SimSettings
-
-
-class Policy(Protocol):
-    name: str
-
-    def synthesize(self, scene, position: np.ndarray, rotation: np.ndarray,
-                   target: np.ndarray, settings: SimSettings,
-                   phases: PhaseTimes) -> Outcome | None: ...
-
-
-@cache
-def _registry() -> dict[str, type]:
-    policies = {}
-    for info in pkgutil.iter_modules(__path__):
-        module = importlib.import_module(f"{__name__}.{info.name}")
-        policy = getattr(module, "POLICY", None)
-        if policy is not None:
-            policies[policy.name] = policy
-    return policies
-
-
-def list_policies() -> list[str]:
-    return sorted(_registry())
-
-
-def get_policy(name: str) -> Policy:
-    try:
-        return _registry()[name]()
-    except KeyError:
-        raise ValueError(f"unknown policy {name!r}; known: {', '.join(list_policies())}") from None
+__all__ = ["Policy", "get_policy", "list_policies", "register_policy"]

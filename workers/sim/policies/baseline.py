@@ -19,13 +19,14 @@ import numpy as np
 from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.policies.closing import close_fingers
+from graspscape.workers.sim.policies.registry import register_policy
 
 BLOCKED_ADVANCE_M = 0.0005
 APPROACH_TIME_CAP_S = 1.5
 
 
+@register_policy("baseline")
 class BaselinePolicy:
-    name = "baseline"
 
     def synthesize(self, scene, position: np.ndarray, rotation: np.ndarray, target: np.ndarray,
                    sim: SimSettings, phases: PhaseTimes) -> Outcome | None:
@@ -66,5 +67,3 @@ class BaselinePolicy:
             return Outcome.NO_CONTACT
 
         return close_fingers(scene, settings, phases)
-
-POLICY = BaselinePolicy

@@ -48,6 +48,7 @@ from graspscape.workers.sim.bullet import (
     saved_state,
 )
 from graspscape.workers.sim.policies.closing import close_fingers
+from graspscape.workers.sim.policies.registry import register_policy
 from scipy.spatial.transform import Rotation
 
 
@@ -164,8 +165,8 @@ def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
     return v * (limit / n) if n > limit else v
 
 
+@register_policy("haptic")
 class HapticPolicy:
-    name = "haptic"
 
     def synthesize(self, scene, position: np.ndarray, rotation: np.ndarray, target: np.ndarray,
                    sim: SimSettings, phases: PhaseTimes) -> Outcome | None:
@@ -251,5 +252,3 @@ class HapticPolicy:
         # Phalanges not yet closing are held where step 2 left them, stiff as in G_c.
         command_joints(angles(), hold)
         return close_fingers(scene, sim.policy, phases)
-
-POLICY = HapticPolicy
