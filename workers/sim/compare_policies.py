@@ -4,8 +4,8 @@ For each object both policies evaluate the same grid of initial poses. Reported 
 v_c and v_s, the volume (cm³) of the viable set, i.e. of the gripper reference-point (palm
 centre) positions whose pose is held along the trajectory; the best μs, μg, μf, μm of each
 policy over its viable poses; and containment, the share of G_c-viable poses that G_s also
-holds. Behavioral manifolds (grouping viable poses by grasp type) come with the adaptive
-exploration issue; until then v is the volume of the whole viable set, not per manifold.
+holds. v is the volume of the whole viable set, not per behavioral manifold (the grouping of
+viable poses by grasp type is the coordinator's explorations': docs/exploration.md).
 
 Volume: a pose (θ, φ, r) stands for the cell θ ± Δθ/2, φ ± Δφ/2, r ± Δr/2. Its reference point
 lies on the ray (θ, φ) from the object's centre of mass at distance ρ(r) (placement.py), so
