@@ -128,8 +128,7 @@ def _picture(exploration_id: int, session: Any, fmt: Literal["png", "svg"], cut:
              phi0_deg: float, attitude: int) -> Response:
     from graspscape.services.coordinator.maps.render import render_map
 
-    manifolds.ensure_manifolds(session, exploration_id)
-    computed = manifolds.compute_map(session, exploration_id)
+    computed = manifolds.current_map(session, exploration_id)
     if attitude >= len(computed.lattice.attitudes):
         raise InvalidInput(
             f"attitude {attitude} out of range: the grid has {len(computed.lattice.attitudes)}",

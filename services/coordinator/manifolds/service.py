@@ -1,8 +1,9 @@
 """Manifolds in the store: recompute from the stored poses, save, and query.
 
 `refresh_manifolds` replaces the exploration's manifold rows and the poses' manifold column
-with what `summary.build_map` computes from every stored pose; it runs as results arrive
-(throttled geometrically: `maybe_refresh`) and once more, final, when the exploration completes. The
+with what `summary.build_map` computes from every stored pose, and notes on the exploration
+row when (poses done, final); it runs as results arrive (throttled geometrically:
+`maybe_refresh`) and once more, final, when the exploration completes. The
 object mesh is needed only for volumes (surface radius along each approach direction); it is
 prepared once per process and object (`objects.geometry`).
 """
@@ -98,12 +99,16 @@ def refresh_manifolds(
     *,
     samples: dict[Point, Sample] | None = None,
     final: bool = False,
-) -> ManifoldMap:
-    """Recompute and store the manifolds (rows and pose assignment); caller commits."""
+) -> ComputedMap:
+    """Recompute and store the manifolds (rows and pose assignment) and when, on the
+    exploration (`manifolds_poses_done`, `manifolds_final`); caller commits. Returns the map
+    it computed, so that a caller drawing it does not compute it again."""
     computed = compute_map(session, exploration_id, samples=samples)
     samples, mmap, label_of = computed.samples, computed.map, computed.label_of
     exploration = session.get(ExplorationRow, exploration_id)
-    poses_done = exploration.poses_done if exploration is not None else 0
+    if exploration is not None:
+        exploration.manifolds_poses_done = exploration.poses_done
+        exploration.manifolds_final = final
     session.execute(
         update(PoseRow).where(PoseRow.exploration_id == exploration_id)
         .values(manifold_id=None).execution_options(synchronize_session=False)
@@ -124,7 +129,7 @@ def refresh_manifolds(
         ManifoldRow(
             exploration_id=exploration_id, label=m.label, signature=signature_of.get(m.best.key),
             size=m.pose_count, best_pose_key=m.best.key, best_mu_s=m.best.mu_s,
-            summary={**m.model_dump(mode="json"), "final": final, "poses_done": poses_done},
+            summary=m.model_dump(mode="json"),
         )
         for m in mmap.manifolds
     ]
@@ -141,32 +146,30 @@ def refresh_manifolds(
             .values(manifold_id=bindparam("m")),
             assignments,
         )
-    return mmap
+    return computed
 
 
-def _last_refresh(session: Session, exploration_id: int) -> dict | None:
-    """What the last refresh stamped on the stored manifolds ("poses_done", "final"), or
-    None where none is stored (never refreshed, or nothing viable then)."""
-    first = session.scalars(
-        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id).limit(1)
-    ).first()
-    return first.summary if first is not None else None
-
-
-def ensure_manifolds(session: Session, exploration_id: int) -> None:
-    """Bring the stored manifolds up to date with the stored poses (commits if it had to)."""
+def ensure_manifolds(session: Session, exploration_id: int) -> ComputedMap | None:
+    """Bring the stored manifolds up to date with the stored poses (commits if it had to).
+    Returns the map where it had to compute it, else None (the stored one is current)."""
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
-    last = _last_refresh(session, exploration_id)
     done = row.status in FINISHED_STATUSES
-    if last is not None:
-        if last.get("poses_done") == row.poses_done and (last.get("final") or not done):
-            return
+    if row.manifolds_poses_done is not None:
+        if row.manifolds_poses_done == row.poses_done and (row.manifolds_final or not done):
+            return None
     elif row.poses_done == 0:
-        return
-    refresh_manifolds(session, exploration_id, final=done)
+        return None
+    computed = refresh_manifolds(session, exploration_id, final=done)
     session.commit()
+    return computed
+
+
+def current_map(session: Session, exploration_id: int) -> ComputedMap:
+    """The map of the stored poses, with the stored manifolds brought up to date: computed
+    once (by the refresh when one was due)."""
+    return ensure_manifolds(session, exploration_id) or compute_map(session, exploration_id)
 
 
 def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
@@ -176,10 +179,10 @@ def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         return
-    refreshed_at = (_last_refresh(session, exploration_id) or {}).get("poses_done")
+    refreshed_at = row.manifolds_poses_done
     if refreshed_at:
         due = row.poses_done >= refreshed_at * (1.0 + REFRESH_GROWTH)
-    else:  # nothing stored yet (or no viable pose last time): count finished tiles
+    else:  # never refreshed yet: count finished tiles
         from graspscape.services.coordinator.store.models import TileRow, TileState
         from sqlalchemy import func
 
@@ -204,10 +207,9 @@ def stored_manifolds(session: Session, exploration_id: int) -> list[ManifoldSumm
 
 
 def is_final(session: Session, exploration_id: int) -> bool:
-    row = session.scalars(
-        select(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id).limit(1)
-    ).first()
-    return bool(row and row.summary and row.summary.get("final"))
+    """Whether the stored manifolds are those of the finished exploration."""
+    row = session.get(ExplorationRow, exploration_id)
+    return bool(row is not None and row.manifolds_final)
 
 
 def approach_vector(theta: float, phi: float) -> tuple[float, float, float]:

@@ -16,15 +16,10 @@ def write_map_files(session: Session, exploration_id: int, picture: Path,
                     "horizontal", phi0_deg: float = 0.0, attitude: int = 0) -> tuple[int, int]:
     """Writes the map (PNG or SVG by suffix) and optionally the manifold table (JSON);
     returns (manifolds, poses)."""
-    from graspscape.services.coordinator.manifolds.service import (
-        compute_map,
-        ensure_manifolds,
-        stored_manifolds,
-    )
+    from graspscape.services.coordinator.manifolds.service import current_map, stored_manifolds
     from graspscape.services.coordinator.maps.render import render_map
 
-    ensure_manifolds(session, exploration_id)
-    computed = compute_map(session, exploration_id)
+    computed = current_map(session, exploration_id)
     fmt = "svg" if picture.suffix.lower() == ".svg" else "png"
     picture.write_bytes(render_map(
         computed.lattice, computed.samples, computed.label_of, computed.map, computed.mesh,

@@ -23,6 +23,7 @@ from sqlalchemy import (
     String,
     Text,
     UniqueConstraint,
+    false,
 )
 from sqlalchemy.orm import Mapped, mapped_column
 
@@ -93,6 +94,10 @@ class ExplorationRow(Base):
     updated_at: Mapped[datetime] = mapped_column(default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column()
     finished_at: Mapped[datetime | None] = mapped_column()
+    # When the stored manifolds were last computed (manifolds/service.py): poses_done then
+    # (null: never), and whether it was the final refresh of the finished exploration.
+    manifolds_poses_done: Mapped[int | None] = mapped_column(Integer)
+    manifolds_final: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
 
 
 class TileRow(Base):

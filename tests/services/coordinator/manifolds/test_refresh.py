@@ -1,4 +1,5 @@
-"""Manifolds are refreshed as results arrive, in geometric steps (manifolds.service)."""
+"""Manifolds are refreshed as results arrive, in geometric steps, the refresh noted on the
+exploration; a map picture computes the map once (manifolds.service)."""
 
 from __future__ import annotations
 
@@ -18,28 +19,32 @@ from tests.factories import oracle_result
 @pytest.mark.slow
 def test_manifolds_refresh_while_exploring_in_steps_that_grow(sessions, named_object,
                                                               monkeypatch) -> None:
-    refreshes: list[tuple[int, bool]] = []
-    refresh = service.refresh_manifolds
+    # Every refresh computes the map once (compute_map, by its module's name): the poses
+    # stored then tell the steps apart.
+    refreshes: list[int] = []
+    compute = service.compute_map
 
     def recording(session, exploration_id, *args, **kwargs):
-        done = session.get(ExplorationRow, exploration_id).poses_done
-        refreshes.append((done, kwargs.get("final", False)))
-        return refresh(session, exploration_id, *args, **kwargs)
+        refreshes.append(session.get(ExplorationRow, exploration_id).poses_done)
+        return compute(session, exploration_id, *args, **kwargs)
 
-    monkeypatch.setattr(service, "refresh_manifolds", recording)
+    monkeypatch.setattr(service, "compute_map", recording)
     spec = ExplorationSpec(
         object_id=named_object("sphere"),
         grid={"dtheta": math.radians(30), "r_min": 0.0, "r_max": 0.02, "dr": 0.01},
         refinement={"levels": 1, "local_search_rounds": 1},
     )
     with sessions() as s:
-        create_exploration(s, spec=spec, tile_target_poses=4, max_poses=10**6)
+        eid = create_exploration(s, spec=spec, tile_target_poses=4, max_poses=10**6).id
     run_local(sessions, lambda poses, match=None: [oracle_result(p) for p in poses],
               workers=1, seed=0)
 
-    assert refreshes[-1][1], "the last refresh is the final one"
-    final_done = refreshes[-1][0]
-    during = [done for done, final in refreshes[:-1]]
+    with sessions() as s:
+        row = s.get(ExplorationRow, eid)
+        # The last refresh is the final one, noted on the exploration.
+        assert row.manifolds_final and row.manifolds_poses_done == row.poses_done
+    final_done = refreshes[-1]
+    during = refreshes[:-1]
     # Refreshed before the end (a reader sees manifolds while the exploration runs) ...
     assert during and min(during) < final_done
     # ... but not every few tiles: a quarter more poses between refreshes, besides the one
@@ -47,3 +52,38 @@ def test_manifolds_refresh_while_exploring_in_steps_that_grow(sessions, named_ob
     growing = sorted(set(during))
     steps = sum(1 for a, b in itertools.pairwise(growing) if b < 1.25 * a)
     assert steps <= spec.refinement.local_search_rounds
+
+
+@pytest.mark.slow
+def test_a_map_picture_computes_the_map_once_and_the_refresh_is_noted_on_the_exploration(
+        sessions, named_object, monkeypatch, tmp_path) -> None:
+    from graspscape.services.coordinator.maps.picture import write_map_files
+    from graspscape.services.coordinator.store.models import ManifoldRow
+    from sqlalchemy import select
+
+    spec = ExplorationSpec(
+        object_id=named_object("sphere"),
+        grid={"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02, "dr": 0.01},
+        refinement={"levels": 1, "local_search_rounds": 0},
+    )
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=20, max_poses=10**6).id
+    run_local(sessions, lambda poses, match=None: [oracle_result(p) for p in poses])
+    computed = []
+    compute = service.compute_map
+    monkeypatch.setattr(service, "compute_map",
+                        lambda *a, **k: computed.append(1) or compute(*a, **k))
+    with sessions() as s:
+        row = s.get(ExplorationRow, eid)
+        assert (row.manifolds_poses_done, row.manifolds_final) == (row.poses_done, True)
+        summaries = s.scalars(select(ManifoldRow.summary)
+                              .where(ManifoldRow.exploration_id == eid)).all()
+        assert summaries and not any({"final", "poses_done"} & set(m) for m in summaries)
+        for stale in (False, True):  # current, then as a database from before 0009 reads
+            if stale:
+                row.manifolds_poses_done, row.manifolds_final = None, False
+                s.commit()
+            computed.clear()
+            write_map_files(s, eid, tmp_path / "map.png")
+            assert len(computed) == 1
+            assert service.is_final(s, eid)
