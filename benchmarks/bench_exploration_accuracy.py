@@ -39,7 +39,7 @@ import numpy as np
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.exploration.lattice import Lattice
 from graspscape.services.coordinator.exploration.service import create_exploration
-from graspscape.services.coordinator.manifolds.behaviour import Sample
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.service import compute_map
 from graspscape.services.coordinator.manifolds.summary import build_map
 from graspscape.services.coordinator.objects.service import create_named
@@ -144,7 +144,7 @@ def _fine_points(lattice: Lattice):
 
 
 class _Row:
-    """A PoseResult seen as a stored row (what Sample.from_row reads)."""
+    """A PoseResult seen as a stored row (what StoredPose.from_row reads)."""
 
     def __init__(self, r: PoseResult) -> None:
         self.pose_key, self.viable, self.outcome = r.pose_key, r.viable, r.outcome.value
@@ -254,7 +254,7 @@ def run_config(name: str, rolls: int, multiple: int, variant: str,
     reused = {k for k, _, source in rows if source}
     lattice = computed.lattice
     fine_pts = _fine_points(lattice)
-    dense_samples = {p: Sample.from_row(_Row(dense[lattice.pose(p).key()])) for p in fine_pts}
+    dense_samples = {p: StoredPose.from_row(_Row(dense[lattice.pose(p).key()])) for p in fine_pts}
     dense_map, dense_fine, _ = build_map(lattice, dense_samples, radius)
     iou, viable_iou = agreement_of(lattice, dense_fine, computed.fine)
     # A pose that reused a matching grasp's outcome (shortcut 2) was simulated up to its
@@ -314,7 +314,7 @@ def reproducibility(name: str, pool, multiple: int, dense: dict[str, PoseResult]
             moved[r.pose_key] = r
     maps = []
     for source in (dense, moved):
-        samples = {p: Sample.from_row(_Row(source[lattice.pose(p).key()])) for p in points}
+        samples = {p: StoredPose.from_row(_Row(source[lattice.pose(p).key()])) for p in points}
         maps.append(build_map(lattice, samples, radius)[1])
     return agreement_of(lattice, *maps)
 
@@ -361,7 +361,7 @@ def main() -> None:
                 dense_walls[name] = round(dense_wall, 1)
             radius = radius_function(spec_mesh(ObjectSpec(name=name)))
             lattice1 = Lattice(_spec(1, 1, multiple, levels=levels).grid, levels)
-            samples1 = {p: Sample.from_row(_Row(dense[lattice1.pose(p).key()]))
+            samples1 = {p: StoredPose.from_row(_Row(dense[lattice1.pose(p).key()]))
                         for p in _fine_points(lattice1)}
             for level, (border, viability) in differing_pairs(lattice1, samples1).items():
                 step = f"{30.0 / 2**level:g}deg"

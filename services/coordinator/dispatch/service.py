@@ -2,7 +2,8 @@
 
 Zenoh callbacks only enqueue (a full queue is answered "unavailable" at once); a pool of
 handler threads does the database work and replies inside the query's context (`with query`),
-so the final reply goes out as soon as the answer is complete. Nothing raised while serving a
+so the final reply goes out as soon as the answer is complete (the store work of each answer
+is dispatch/answers.py's). Nothing raised while serving a
 query escapes: bad input gets an error reply, store failures an "unavailable" reply the
 worker retries, and both are logged and counted.
 """
@@ -19,30 +20,21 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
+from graspscape.services.coordinator.dispatch.answers import lease_for, report_batch
 from graspscape.services.coordinator.dispatch.catalog import WorkContexts, mesh_by_hash
 from graspscape.services.coordinator.dispatch.counters import DispatchCounters
-from graspscape.services.coordinator.dispatch.leases import (
-    lease_owners,
-    release_tile,
-    release_unheld,
-    requeue_lost,
-)
-from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
-from graspscape.services.coordinator.exploration.scheduler import ingest_results
+from graspscape.services.coordinator.dispatch.leases import lease_owners, requeue_lost
 from graspscape.services.coordinator.settings import Settings
-from graspscape.services.coordinator.store.queue import fail_tile, lease_tiles
 from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.wire import keys
 from graspscape.shared.wire.codec import decode_as, encode, error
 from graspscape.shared.wire.messages import (
-    Ack,
     ErrorCode,
     ErrorReply,
     LeaseRequest,
     ObjectData,
     ObjectRequest,
     ResultBatch,
-    TileLease,
 )
 from graspscape.shared.wire.session import write_users_file, zenoh_config
 from prometheus_client import CollectorRegistry
@@ -260,31 +252,16 @@ class Dispatcher:
             return request
         n = min(request.capacity, self.zs.max_tiles_per_request)
         with self._store_turn, self.sessions() as session:
-            lost = release_unheld(session, worker_id=request.worker_id, holding=request.holding)
-            if lost:
-                self.counters.tiles_requeued.labels("reply_lost").inc(lost)
-                log.info("%d tiles of %s whose lease reply was lost: queued again",
-                         lost, request.worker_id)
-            tiles = lease_tiles(
-                session,
-                worker_id=request.worker_id,
-                n=n,
-                lease_seconds=self.settings.queue.lease_seconds,
-                host=request.host,
-                capacity=request.capacity,
-            )
-            contexts = self.contexts.contexts(session, {t.exploration_id for t in tiles})
-        for tile in tiles:
-            ctx = contexts[tile.exploration_id]
-            message = TileLease.of(
-                tile,
-                object=ctx.object,
-                gripper=ctx.gripper,
-                settings=ctx.settings,
-                configuration_match=ctx.configuration_match,
-            )
-            query.reply(keys.lease_reply_key(tile.tile_id), encode(message))
-        self.counters.tiles_leased.inc(len(tiles))
+            leased = lease_for(session, request, n=n,
+                               lease_seconds=self.settings.queue.lease_seconds,
+                               contexts=self.contexts)
+        if leased.lost:
+            self.counters.tiles_requeued.labels("reply_lost").inc(leased.lost)
+            log.info("%d tiles of %s whose lease reply was lost: queued again",
+                     leased.lost, request.worker_id)
+        for message in leased.messages():
+            query.reply(keys.lease_reply_key(message.tile_id), encode(message))
+        self.counters.tiles_leased.inc(len(leased.tiles))
         return None  # no tile: the empty answer tells the worker to back off
 
     def _results(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:
@@ -293,52 +270,14 @@ class Dispatcher:
             return batch
         self.counters.poses_received.inc(len(batch.results))
         with self._store_turn, self.sessions() as session:
-            try:
-                report = ingest_results(
-                    session,
-                    tile_id=batch.tile_id,
-                    lease_epoch=batch.lease_epoch,
-                    worker_id=batch.worker_id,
-                    results=batch.results,
-                    final=batch.final and batch.error is None,
-                )
-            except NotFound:
-                # Its exploration was deleted: the results have no home, and a retry never
-                # will; acknowledging ends the worker's retries.
-                ack = Ack(tile_id=batch.tile_id, lease_epoch=batch.lease_epoch, inserted=0,
-                          duplicates=0, tile_state="deleted")
-                query.reply(str(query.key_expr), encode(ack))
-                return None
-            except NotLeaseHolder as exc:
-                # Not from the tile's latest lease (another worker's, or re-leased since):
-                # refused before anything is stored, failed or released.
-                return error(ErrorCode.NOT_LEASE_HOLDER, exc.message)
-            except InvalidInput as exc:
-                return error(ErrorCode.INVALID, exc.message)
-            state = report.tile_state
-            if batch.error is not None:
-                state = fail_tile(
-                    session,
-                    tile_id=batch.tile_id,
-                    lease_epoch=batch.lease_epoch,
-                    error=f"{batch.worker_id}: {batch.error}",
-                    max_attempts=self.settings.queue.max_attempts,
-                )
-            elif batch.release and not batch.final and release_tile(
-                session, tile_id=batch.tile_id, lease_epoch=batch.lease_epoch
-            ):
-                self.counters.tiles_requeued.labels("released").inc()
-                state = "queued"
-        ack = Ack(
-            tile_id=batch.tile_id,
-            lease_epoch=batch.lease_epoch,
-            inserted=report.inserted,
-            duplicates=report.duplicates,
-            tile_state=str(state),
-            missing=report.missing,
-        )
+            reported = report_batch(session, batch,
+                                    max_attempts=self.settings.queue.max_attempts)
+        if isinstance(reported.reply, ErrorReply):
+            return reported.reply
+        if reported.released:
+            self.counters.tiles_requeued.labels("released").inc()
         # Sent only now, after the batch is committed: the reply is the acknowledgement.
-        query.reply(str(query.key_expr), encode(ack))
+        query.reply(str(query.key_expr), encode(reported.reply))
         return None
 
     def _object(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:

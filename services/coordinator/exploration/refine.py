@@ -24,9 +24,9 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.manifolds.behaviour import Sample, differs
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose, differs
 
-Lookup = Callable[[Point], Sample | None]
+Lookup = Callable[[Point], StoredPose | None]
 
 
 @dataclass(frozen=True)

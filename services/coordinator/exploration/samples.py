@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.manifolds.behaviour import Sample
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
@@ -54,9 +54,9 @@ def point_or_none(lattice: Lattice, pose: Pose) -> Point | None:
 
 def load_samples(
     session: Session, exploration_id: int, lattice: Lattice, keys: Iterable[str] | None = None
-) -> dict[Point, Sample]:
+) -> dict[Point, StoredPose]:
     """Stored poses of an exploration (all, or those with the given keys) by lattice point."""
-    out: dict[Point, Sample] = {}
+    out: dict[Point, StoredPose] = {}
     base = select(*_SAMPLE_COLUMNS).where(PoseRow.exploration_id == exploration_id)
     if keys is None:
         batches = [session.execute(base).all()]
@@ -68,7 +68,7 @@ def load_samples(
         ]
     for rows in batches:
         for row in rows:
-            sample = Sample.from_row(row)
+            sample = StoredPose.from_row(row)
             pose = Pose(theta=row.theta, phi=row.phi, r=row.r, roll=row.roll, pitch=row.pitch,
                         yaw=row.yaw)
             p = point_or_none(lattice, pose)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,8 +36,9 @@ def digit(link: str) -> str:
 
 
 @dataclass(frozen=True)
-class Sample:
-    """What the map needs of one stored pose."""
+class StoredPose:
+    """A stored pose as the map and the strategies read it: its result, and of its grasp the
+    digits in contact, their contact centroids and the joint angles."""
 
     key: str
     theta: float
@@ -57,9 +59,12 @@ class Sample:
     source: str = "evaluated"  # or "shortcut:normal", "shortcut:configuration", "shortcut:symmetry"
 
     @staticmethod
-    def from_row(row: Any) -> Sample:
+    def from_row(row: Any) -> StoredPose:
+        """From a stored pose row (columns as attributes), or from the column mapping of a
+        row about to be stored (the shortcuts' copies)."""
+        get = row.get if isinstance(row, Mapping) else lambda name: getattr(row, name, None)
         digits: dict[str, list[tuple[tuple[float, float, float], float]]] = {}
-        sig = row.signature or {}
+        sig = get("signature") or {}
         for c in sig.get("contacts", ()):
             digits.setdefault(digit(c["link"]), []).append(
                 (tuple(c["position_object"]), max(float(c["normal_force_n"]), 0.0))
@@ -75,23 +80,23 @@ class Sample:
             contacts[d] = tuple(
                 sum(w * pos[i] for (pos, _), w in zip(items, ws, strict=True)) for i in range(3)
             )
-        return Sample(
-            key=row.pose_key,
-            theta=row.theta,
-            phi=row.phi,
-            r=row.r,
-            roll=row.roll,
-            pitch=row.pitch,
-            yaw=row.yaw,
-            viable=bool(row.viable),
-            outcome=row.outcome,
-            mu_s=float(row.mu_s),
-            effort=float(row.effort_max_nm or 0.0),
+        return StoredPose(
+            key=get("pose_key"),
+            theta=get("theta"),
+            phi=get("phi"),
+            r=get("r"),
+            roll=get("roll"),
+            pitch=get("pitch"),
+            yaw=get("yaw"),
+            viable=bool(get("viable")),
+            outcome=get("outcome"),
+            mu_s=float(get("mu_s")),
+            effort=float(get("effort_max_nm") or 0.0),
             digits=frozenset(digits),
             contacts=contacts,  # type: ignore[arg-type]
             joints={k: float(v) for k, v in (sig.get("joint_angles") or {}).items()},
-            grasp=row.grasp,
-            source=source_of(row),
+            grasp=get("grasp"),
+            source=source_of(get("worker_id"), get("inferred_from")),
         )
 
     def direction(self) -> tuple[float, float, float]:
@@ -99,19 +104,19 @@ class Sample:
         return (st * math.cos(self.phi), st * math.sin(self.phi), math.cos(self.theta))
 
 
-def source_of(row: Any) -> str:
+def source_of(worker_id: str | None, inferred_from: str | None) -> str:
     """How a stored pose was obtained: "evaluated" (simulated through), or the shortcut that
     supplied its result ("shortcut:normal" or "shortcut:symmetry" copied by the coordinator,
     "shortcut:configuration" synthesized by a worker, trajectory outcome reused)."""
-    worker = row.worker_id or ""
+    worker = worker_id or ""
     if worker.startswith("shortcut:"):
         return worker
-    if getattr(row, "inferred_from", None):
+    if inferred_from:
         return "shortcut:configuration"
     return "evaluated"
 
 
-def start_frame(s: Sample) -> np.ndarray:
+def start_frame(s: StoredPose) -> np.ndarray:
     """The gripper's start attitude as placement builds it (palm normal toward the object,
     two-finger side up, then roll, pitch, yaw), taking the approach direction for the surface
     normal (the coordinator has no mesh at hand here; exact for a sphere, close elsewhere)."""
@@ -126,14 +131,14 @@ def start_frame(s: Sample) -> np.ndarray:
     return base @ Rotation.from_euler("ZYX", [s.roll, s.pitch, s.yaw]).as_matrix()
 
 
-def approach_angle(a: Sample, b: Sample) -> float:
+def approach_angle(a: StoredPose, b: StoredPose) -> float:
     """Rotation angle between the two start attitudes of the gripper, rad. Near the poles the
     reference attitude turns fast with φ, so this is larger than the angle between directions."""
     rel = start_frame(a).T @ start_frame(b)
     return float(math.acos(max(-1.0, min(1.0, (np.trace(rel) - 1.0) / 2.0))))
 
 
-def same_behaviour(a: Sample, b: Sample, tolerance: float | None = None) -> bool:
+def same_behaviour(a: StoredPose, b: StoredPose, tolerance: float | None = None) -> bool:
     """Both viable, the same digits touching, and the hand closed alike (each digit's mean
     joint angle difference within JOINT_TOLERANCE_RAD). Where joint angles are missing,
     contacts must have slid with the approach rather than jumped (`slid`)."""
@@ -145,7 +150,7 @@ def same_behaviour(a: Sample, b: Sample, tolerance: float | None = None) -> bool
     return slid(a, b)
 
 
-def joint_difference(a: Sample, b: Sample, joints: set[str]) -> float:
+def joint_difference(a: StoredPose, b: StoredPose, joints: set[str]) -> float:
     """The largest per-digit mean |Δ joint angle|: one finger closing differently counts in
     full instead of being averaged away by the fingers that did not change."""
     per_digit: dict[str, list[float]] = {}
@@ -154,7 +159,7 @@ def joint_difference(a: Sample, b: Sample, joints: set[str]) -> float:
     return max(sum(v) / len(v) for v in per_digit.values())
 
 
-def slid(a: Sample, b: Sample) -> bool:
+def slid(a: StoredPose, b: StoredPose) -> bool:
     """Every digit's object-frame contact moved at most the arc the gripper turned through at
     the contact's distance from the centre of mass (× SLIDE_FACTOR, + Δr, + SLACK_M)."""
     angle = approach_angle(a, b)
@@ -169,7 +174,7 @@ def slid(a: Sample, b: Sample) -> bool:
     return True
 
 
-def differs(a: Sample, b: Sample, mu_step_max: float | None = None) -> bool:
+def differs(a: StoredPose, b: StoredPose, mu_step_max: float | None = None) -> bool:
     """A border (viability or grasp type) or, optionally, a steep μs slope lies between them."""
     if a.viable != b.viable:
         return True

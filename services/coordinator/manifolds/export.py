@@ -51,7 +51,7 @@ def pose_records(session: Session, exploration_id: int) -> list[dict[str, Any]]:
             "viable": bool(row.viable), "mu_s": row.mu_s, "effort_max_nm": row.effort_max_nm,
             "effective_r": row.effective_r,
             "manifold": labels.get(row.manifold_id, "") if row.manifold_id else "",
-            "source": source_of(row),
+            "source": source_of(row.worker_id, row.inferred_from),
             "inferred_from": row.inferred_from or "",
             "links_in_contact": " ".join((row.signature or {}).get("links_in_contact", ())),
             "grasp": json.dumps(row.grasp, sort_keys=True) if row.grasp else "",

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.manifolds.behaviour import Sample, same_behaviour
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
 from scipy.spatial import cKDTree
 
 NON_VIABLE = -1
@@ -61,7 +61,7 @@ class _UnionFind:
             self.parent[hi] = lo
 
 
-def components(lattice: Lattice, samples: Mapping[Point, Sample]) -> list[list[Point]]:
+def components(lattice: Lattice, samples: Mapping[Point, StoredPose]) -> list[list[Point]]:
     """Connected same-behaviour sets of viable points, each sorted, in a canonical order."""
     uf = _UnionFind()
     for p in sorted(samples):
@@ -88,7 +88,7 @@ def components(lattice: Lattice, samples: Mapping[Point, Sample]) -> list[list[P
 
 
 def _merge_specks(
-    lattice: Lattice, samples: Mapping[Point, Sample], comps: list[list[Point]]
+    lattice: Lattice, samples: Mapping[Point, StoredPose], comps: list[list[Point]]
 ) -> list[list[Point]]:
     """Fold specks (fewer than max(MIN_POSES, MIN_SHARE of the viable poses) members) into
     the larger neighbouring component they nearly match most often (same digits, joints
@@ -155,7 +155,7 @@ def _embed(lattice: Lattice, pts: list[Point]) -> np.ndarray:
 
 def fine_labels(
     lattice: Lattice,
-    samples: Mapping[Point, Sample],
+    samples: Mapping[Point, StoredPose],
     label_of: Mapping[Point, int],
     radius: Callable[[np.ndarray], np.ndarray],
 ) -> FineLabels:
@@ -211,7 +211,7 @@ def volumes(fine: FineLabels, n_labels: int) -> list[float]:
     return out
 
 
-def describe(samples: list[Sample]) -> str:
+def describe(samples: list[StoredPose]) -> str:
     """Which digits touch which part of the object, from the members' contacts."""
     digit_sets = Counter(s.digits for s in samples)
     digits = sorted(digit_sets.most_common(1)[0][0]) if digit_sets else []

@@ -21,7 +21,7 @@ from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
 from graspscape.services.coordinator.exploration.specs import spec_of
-from graspscape.services.coordinator.manifolds.behaviour import Sample
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
     FALLBACK_RADIUS,
     FineLabels,
@@ -66,7 +66,7 @@ def radius_function(mesh: Any | None) -> Any:
 class ComputedMap:
     spec: ExplorationSpec
     lattice: Lattice
-    samples: dict[Point, Sample]
+    samples: dict[Point, StoredPose]
     map: ManifoldMap
     fine: FineLabels
     label_of: dict[Point, int]
@@ -74,7 +74,7 @@ class ComputedMap:
 
 
 def compute_map(
-    session: Session, exploration_id: int, *, samples: dict[Point, Sample] | None = None
+    session: Session, exploration_id: int, *, samples: dict[Point, StoredPose] | None = None
 ) -> ComputedMap:
     """The manifold map of the stored poses (not stored by this function)."""
     row = session.get(ExplorationRow, exploration_id)
@@ -97,7 +97,7 @@ def refresh_manifolds(
     spec: ExplorationSpec | None = None,
     lattice: Lattice | None = None,
     *,
-    samples: dict[Point, Sample] | None = None,
+    samples: dict[Point, StoredPose] | None = None,
     final: bool = False,
 ) -> ComputedMap:
     """Recompute and store the manifolds (rows and pose assignment) and when, on the

@@ -15,7 +15,7 @@ import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.refine import local_maxima
 from graspscape.services.coordinator.exploration.schemas import PoseValues
-from graspscape.services.coordinator.manifolds.behaviour import Sample
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
     FineLabels,
     components,
@@ -33,7 +33,7 @@ class PoseBrief(PoseValues):
     key: str
 
     @staticmethod
-    def of(s: Sample) -> PoseBrief:
+    def of(s: StoredPose) -> PoseBrief:
         return PoseBrief(
             key=s.key, theta=s.theta, phi=s.phi, r=s.r, roll=s.roll, pitch=s.pitch, yaw=s.yaw,
             mu_s=s.mu_s, effort_max_nm=s.effort,
@@ -68,7 +68,7 @@ class ManifoldMap(BaseModel):
 
 def build_map(
     lattice: Lattice,
-    samples: Mapping[Point, Sample],
+    samples: Mapping[Point, StoredPose],
     radius: Callable[[np.ndarray], np.ndarray],
     *,
     maxima_per_manifold: int = 3,
@@ -82,7 +82,7 @@ def build_map(
     label_of = {p: relabel[i] for p, i in provisional.items()}
     fine.labels[:] = [relabel[int(x)] if x >= 0 else -1 for x in fine.labels]
 
-    def lookup(p: Point) -> Sample | None:
+    def lookup(p: Point) -> StoredPose | None:
         return samples.get(p)
 
     out = []

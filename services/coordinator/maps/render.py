@@ -23,7 +23,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.manifolds.behaviour import Sample
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
     FALLBACK_RADIUS,
     label_name,
@@ -54,7 +54,7 @@ def _embed(dirs: np.ndarray, r: np.ndarray, lattice: Lattice) -> np.ndarray:
 
 def cut_field(
     lattice: Lattice,
-    samples: Mapping[Point, Sample],
+    samples: Mapping[Point, StoredPose],
     label_of: Mapping[Point, int],
     mesh: Any | None,
     *,
@@ -115,7 +115,7 @@ def _section(mesh: Any | None, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
 
 
 def _draw_cut(ax: Any, field: dict[str, Any], mmap: ManifoldMap, lattice: Lattice,
-              samples: Mapping[Point, Sample], mesh: Any | None, title: str) -> None:
+              samples: Mapping[Point, StoredPose], mesh: Any | None, title: str) -> None:
     X, Y, labels, mu = field["X"], field["Y"], field["labels"], field["mu"]
     e1, e2 = field["e1"], field["e2"]
     n = max(1, len(mmap.manifolds))
@@ -165,7 +165,7 @@ def _draw_cut(ax: Any, field: dict[str, Any], mmap: ManifoldMap, lattice: Lattic
     ax.set_xlabel("m")
 
 
-def _draw_3d(ax: Any, lattice: Lattice, samples: Mapping[Point, Sample],
+def _draw_3d(ax: Any, lattice: Lattice, samples: Mapping[Point, StoredPose],
              label_of: Mapping[Point, int], mesh: Any | None) -> None:
     pts = sorted(p for p in samples if samples[p].viable)
     if pts:
@@ -184,7 +184,7 @@ def _draw_3d(ax: Any, lattice: Lattice, samples: Mapping[Point, Sample],
 
 def render_map(
     lattice: Lattice,
-    samples: Mapping[Point, Sample],
+    samples: Mapping[Point, StoredPose],
     label_of: Mapping[Point, int],
     mmap: ManifoldMap,
     mesh: Any | None,

@@ -42,7 +42,7 @@ from graspscape.services.coordinator.exploration.tiling import (
     count_poses,
     group_tiles,
 )
-from graspscape.services.coordinator.manifolds.behaviour import Sample
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import components
 from graspscape.services.coordinator.manifolds.service import maybe_refresh, refresh_manifolds
 from graspscape.services.coordinator.store.models import PosePlanRow, TileRow
@@ -62,7 +62,7 @@ class AdaptiveStrategy:
         # A coarse-only exploration has no search rounds; its manifolds are computed on
         # request (manifolds.service `ensure_manifolds`), not on every ingest.
         self.has_rounds = self.lattice.depth > 0
-        self._samples: dict[Point, Sample] | None = None  # read by next_round, for progress
+        self._samples: dict[Point, StoredPose] | None = None  # read by next_round, for progress
 
     # --- the coarse pass -----------------------------------------------------------------
     def planned_poses(self) -> int:
@@ -172,7 +172,7 @@ class AdaptiveStrategy:
                               samples=self._samples, final=stage == Stage.FINISHED)
 
     # --- helpers -------------------------------------------------------------------------
-    def _load(self, batch: Batch, points: set[Point]) -> dict[Point, Sample]:
+    def _load(self, batch: Batch, points: set[Point]) -> dict[Point, StoredPose]:
         return load_samples(batch.session, batch.exploration_id, self.lattice,
                             [self.lattice.pose(q).key() for q in points])
 
@@ -199,7 +199,7 @@ class AdaptiveStrategy:
                                 else prop.level, prop.reason))
         return out
 
-    def _infer(self, batch: Batch, inferences: list[Inference], samples: dict[Point, Sample],
+    def _infer(self, batch: Batch, inferences: list[Inference], samples: dict[Point, StoredPose],
                paths: dict[Point, tuple[symmetry.Symmetry, ...]] | None = None) -> None:
         """Store copies of the sources' results; later decisions of this batch read them."""
         lattice = self.lattice
@@ -210,10 +210,10 @@ class AdaptiveStrategy:
             None if paths is None else [paths.get(i.point, ()) for i in inferences],
             hand_mirror(self.spec) if paths is not None else None)
         for inf, row in zip(inferences, rows, strict=True):
-            samples[inf.point] = Sample.from_row(row)
+            samples[inf.point] = StoredPose.from_row(row)
 
     def _mirror(self, batch: Batch, points: list[Point], orbits: Orbits,
-                samples: dict[Point, Sample]) -> list[Point]:
+                samples: dict[Point, StoredPose]) -> list[Point]:
         """Shortcut 3: copy each new result onto the rest of its orbit; returns the new
         points."""
         todo: dict[Point, Inference] = {}

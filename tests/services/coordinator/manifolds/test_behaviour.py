@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from graspscape.services.coordinator.manifolds.behaviour import Sample, digit, same_behaviour
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose, digit, same_behaviour
 
 
 def test_every_link_of_a_finger_is_that_finger():
@@ -13,8 +13,8 @@ def test_every_link_of_a_finger_is_that_finger():
     assert digit("palm") == "palm"
 
 
-def _sample(key: str, links: tuple[str, ...]) -> Sample:
-    return Sample(key=key, theta=1.0, phi=0.0, r=0.01, roll=0.0, pitch=0.0, yaw=0.0,
+def _sample(key: str, links: tuple[str, ...]) -> StoredPose:
+    return StoredPose(key=key, theta=1.0, phi=0.0, r=0.01, roll=0.0, pitch=0.0, yaw=0.0,
                   viable=True, outcome="held", mu_s=0.8,
                   digits=frozenset(digit(link) for link in links),
                   joints={"A_1": 0.3, "B_1": 0.3, "C_1": 0.3})
