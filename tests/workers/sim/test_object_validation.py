@@ -96,6 +96,7 @@ def test_a_mesh_file_without_mass_is_refused(tmp_path: Path, cache_dir: Path) ->
 
 def test_every_named_object_passes_without_warning_and_both_sides_know_its_size() -> None:
     assert set(BUILTIN_NAMES) == set(BUILTINS) and set(PB_NAMES) == set(PB_ENTRIES)
+    assert set(NAMED_SIZE_M) == {*BUILTIN_NAMES, *(f"pb:{n}" for n in PB_NAMES)}
     for name in list_builtin_objects():
         report = inspect_object(ObjectSpec(name=name))
         assert report.errors == [] and report.warnings == [], name
