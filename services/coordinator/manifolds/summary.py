@@ -27,10 +27,13 @@ from graspscape.services.coordinator.manifolds.grouping import (
 from pydantic import BaseModel
 
 
-class PoseBrief(PoseValues):
-    """A pose of the map by its key (the stored pose is GET …/poses?…, the same values)."""
-
+class _Keyed(BaseModel):
     key: str
+
+
+# Bases in this order put `key` first, as manifold tables have always been written.
+class PoseBrief(PoseValues, _Keyed):
+    """A pose of the map by its key (the stored pose is GET …/poses?…, the same values)."""
 
     @staticmethod
     def of(s: StoredPose) -> PoseBrief:
