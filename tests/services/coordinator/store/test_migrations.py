@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import uuid
+from collections.abc import Iterator
+from datetime import UTC, datetime
+
+import psycopg
+import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.store.models import Base
 from sqlalchemy import Engine, inspect
+
+from tests.conftest import PG_URL
 
 
 def test_schema_is_at_head(engine: Engine) -> None:
@@ -123,46 +131,63 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     engine.dispose()
 
 
-def test_0007_stores_the_search_round_explicitly_and_back(tmp_path) -> None:
+@pytest.fixture(params=["sqlite", "postgresql"])
+def empty_url(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:
+    """A database with no schema yet (the test migrates it), on either backend."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'empty.db'}"
+        return
+    schema = f"gs_test_{uuid.uuid4().hex[:12]}"
+    conninfo = PG_URL.replace("postgresql+psycopg://", "postgresql://")
+    with psycopg.connect(conninfo, autocommit=True) as conn:
+        conn.execute(f'CREATE SCHEMA "{schema}"')
+    try:
+        yield f"{PG_URL}?options=-csearch_path%3D{schema}"
+    finally:
+        with psycopg.connect(conninfo, autocommit=True) as conn:
+            conn.execute(f'DROP SCHEMA "{schema}" CASCADE')
+
+
+def test_0007_stores_the_search_round_explicitly_and_back(empty_url: str) -> None:
     """Tiles of local search round k were stored at level 100 + k: 0007 gives them round k
     and the exploration's finest level, keeping every other tile; the downgrade restores
-    the old levels."""
+    the old levels. On both backends (the depth is read from the stored spec's JSON)."""
     from alembic import command
-    from sqlalchemy import text
+    from sqlalchemy import MetaData, insert, text
 
-    url = f"sqlite:///{tmp_path / 'rounds.db'}"
-    db.upgrade(url, "0006")
-    engine = db.make_engine(url)
-    now = "2026-12-01 00:00:00.000000"
+    db.upgrade(empty_url, "0006")
+    engine = db.make_engine(empty_url)
+    old = MetaData()
+    old.reflect(engine)
+    now = datetime(2026, 12, 1, tzinfo=UTC)
     levels = [(0, 0), (0, 1), (2, 0), (100, 0), (100, 1), (101, 0)]  # (level, index)
     with engine.begin() as c:
-        c.execute(text("INSERT INTO objects (id, kind, name, properties, created_at) "
-                       "VALUES (1, 'named', 'sphere', '{}', :now)"), {"now": now})
-        c.execute(text(
-            "INSERT INTO explorations (id, object_id, spec, status, tiles_total, poses_total, "
-            "poses_done, viable_count, created_at, updated_at) VALUES (1, 1, :spec, 'running', "
-            "6, 6, 0, 0, :now, :now)"),
-            {"spec": '{"object_id": 1, "refinement": {"levels": 2}}', "now": now})
-        for level, index in levels:
-            c.execute(text(
-                'INSERT INTO tiles (exploration_id, level, "index", cells, r_levels, attitudes, '
-                "n_poses, state, lease_epoch, attempts, updated_at) VALUES (1, :level, :index, "
-                "'[]', '[]', '[]', 0, 'queued', 0, 0, :now)"),
-                {"level": level, "index": index, "now": now})
-    order = 'SELECT round, level, "index" FROM tiles ORDER BY id'
+        c.execute(insert(old.tables["objects"]).values(
+            id=1, kind="named", name="sphere", properties={}, created_at=now))
+        c.execute(insert(old.tables["explorations"]).values(
+            id=1, object_id=1, spec={"object_id": 1, "refinement": {"levels": 2}},
+            status="running", tiles_total=6, poses_total=6, poses_done=0, viable_count=0,
+            created_at=now, updated_at=now))
+        c.execute(insert(old.tables["tiles"]), [
+            {"exploration_id": 1, "level": level, "index": index, "cells": [], "r_levels": [],
+             "attitudes": [], "n_poses": 0, "state": "queued", "lease_epoch": 0,
+             "attempts": 0, "updated_at": now}
+            for level, index in levels])
     engine.dispose()
-    db.upgrade(url)
-    engine = db.make_engine(url)
+    db.upgrade(empty_url)
+    engine = db.make_engine(empty_url)
     with engine.connect() as c:
-        assert c.execute(text(order)).all() == [
+        assert c.execute(text('SELECT round, level, "index" FROM tiles ORDER BY id')).all() == [
             (0, 0, 0), (0, 0, 1), (0, 2, 0), (1, 2, 0), (1, 2, 1), (2, 2, 0)]
         context = MigrationContext.configure(c, opts={"compare_type": True})
         assert compare_metadata(context, Base.metadata) == []
-        sql = c.execute(text("SELECT sql FROM sqlite_master WHERE name = 'tiles'")).scalar_one()
-        assert "AUTOINCREMENT" in sql
+        if engine.dialect.name == "sqlite":
+            sql = c.execute(text("SELECT sql FROM sqlite_master WHERE name = 'tiles'")
+                            ).scalar_one()
+            assert "AUTOINCREMENT" in sql
     engine.dispose()
-    command.downgrade(db.alembic_config(url), "0006")
-    engine = db.make_engine(url)
+    command.downgrade(db.alembic_config(empty_url), "0006")
+    engine = db.make_engine(empty_url)
     with engine.connect() as c:
         assert c.execute(text('SELECT level, "index" FROM tiles ORDER BY id')).all() == levels
     engine.dispose()
