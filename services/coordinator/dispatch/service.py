@@ -54,7 +54,7 @@ class Dispatcher:
         registry: CollectorRegistry | None = None,
     ) -> None:
         self.settings = settings
-        self.zs = settings.zenoh
+        self.zenoh_settings = settings.zenoh
         self.sessions = sessions
         self.counters = DispatchCounters(registry)
         self.contexts = WorkContexts()
@@ -85,11 +85,12 @@ class Dispatcher:
         Listening beyond loopback without authentication is refused at once (ValueError),
         unless the settings allow it explicitly.
         """
-        refusal = self.zs.listen_refusal()
+        refusal = self.zenoh_settings.listen_refusal()
         if refusal is not None:
             raise ValueError(refusal)
-        if self.zs.users_file is not None and not self.zs.users_file.is_file():
-            raise ValueError(f"zenoh users_file {self.zs.users_file} is not a file")
+        users_file = self.zenoh_settings.users_file
+        if users_file is not None and not users_file.is_file():
+            raise ValueError(f"zenoh users_file {users_file} is not a file")
         try:
             self._open()
         except Exception as exc:
@@ -111,36 +112,38 @@ class Dispatcher:
     def _users_file(self, listen: list[str]) -> Path | None:
         """The dictionary the embedded peer checks workers against: users_file, or one made
         of user + password (zenoh reads only files), private to this process."""
-        if not listen or not self.zs.authenticates:
+        if not listen or not self.zenoh_settings.authenticates:
             return None
-        if self.zs.users_file is not None:
-            return self.zs.users_file
-        assert self.zs.password is not None
+        if self.zenoh_settings.users_file is not None:
+            return self.zenoh_settings.users_file
+        assert self.zenoh_settings.password is not None
         if self._users_dir is None:
             self._users_dir = Path(tempfile.mkdtemp(prefix="graspscape-zenoh-"))
+        login = self.zenoh_settings
         return write_users_file(self._users_dir / "users",
-                                {self.zs.user: self.zs.password.get_secret_value()})
+                                {login.user: login.password.get_secret_value()})
 
     def _open(self) -> None:
         # A client only connects (to routers); only the embedded peer listens.
-        listen = self.zs.listen if self.zs.mode == "peer" else []
-        password = self.zs.password.get_secret_value() if self.zs.password else None
+        listen = self.zenoh_settings.listen if self.zenoh_settings.mode == "peer" else []
+        secret = self.zenoh_settings.password
+        password = secret.get_secret_value() if secret is not None else None
         # A client without its router fails after 5 s and is retried by start(); a peer
         # opens at once and keeps dialling its routers in the background.
         session = zenoh.open(
             zenoh_config(
-                mode=self.zs.mode,
+                mode=self.zenoh_settings.mode,
                 listen=listen,
-                connect=self.zs.connect,
+                connect=self.zenoh_settings.connect,
                 connect_timeout_ms=5000,
-                exit_on_failure=self.zs.mode == "client",
-                user=self.zs.user if password is not None else None,
+                exit_on_failure=self.zenoh_settings.mode == "client",
+                user=self.zenoh_settings.user if password is not None else None,
                 password=password,
                 users_file=self._users_file(listen),
             )
         )
         self._session = session
-        for _ in range(self.zs.handler_threads):
+        for _ in range(self.zenoh_settings.handler_threads):
             thread = threading.Thread(target=self._serve, name="dispatch", daemon=True)
             thread.start()
             self._threads.append(thread)
@@ -161,10 +164,10 @@ class Dispatcher:
         freeze_startup_heap()
         log.info(
             "dispatch up: zenoh %s, listen %s, connect %s, %s",
-            self.zs.mode,
-            self.zs.listen,
-            self.zs.connect,
-            "workers log in (usrpwd)" if self.zs.authenticates else "no authentication",
+            self.zenoh_settings.mode,
+            self.zenoh_settings.listen,
+            self.zenoh_settings.connect,
+            "workers log in (usrpwd)" if self.zenoh_settings.authenticates else "no authentication",
         )
 
     def stop(self) -> None:
@@ -250,7 +253,7 @@ class Dispatcher:
         request = decode_as(data, LeaseRequest)
         if isinstance(request, ErrorReply):
             return request
-        n = min(request.capacity, self.zs.max_tiles_per_request)
+        n = min(request.capacity, self.zenoh_settings.max_tiles_per_request)
         with self._store_turn, self.sessions() as session:
             leased = lease_for(session, request, n=n,
                                lease_seconds=self.settings.queue.lease_seconds,
@@ -339,7 +342,7 @@ class Dispatcher:
         # Workers that died while this coordinator was down left leases that no liveliness
         # DELETE will ever announce. After a grace period, in which live workers reconnect
         # and show their tokens, leases of owners without a token go back to the queue.
-        if self._stopping.wait(self.zs.orphan_grace_s):
+        if self._stopping.wait(self.zenoh_settings.orphan_grace_s):
             return
         try:
             alive = self.alive_workers()

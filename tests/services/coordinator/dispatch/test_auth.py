@@ -114,7 +114,8 @@ def guarded(sqlite_url: str, sqlite_sessions: sessionmaker[Session],
 
 
 def worker(dispatcher: Dispatcher, **login: str) -> WorkerProcess:
-    config = WorkerConfig(connect=dispatcher.zs.listen, procs=1, name="auth", instant=True,
+    config = WorkerConfig(connect=dispatcher.zenoh_settings.listen,
+                          procs=1, name="auth", instant=True,
                           query_timeout_s=5, backoff_min_s=0.2, backoff_max_s=0.5, **login)
     return WorkerProcess(config, 0)
 
@@ -164,7 +165,7 @@ def test_a_users_file_admits_each_of_its_users(
     dispatcher = Dispatcher(settings, sqlite_sessions, CollectorRegistry())
     dispatcher.start()
     assert dispatcher.ready
-    loopback = [dispatcher.zs.listen[0].replace("0.0.0.0", "127.0.0.1")]
+    loopback = [dispatcher.zenoh_settings.listen[0].replace("0.0.0.0", "127.0.0.1")]
     try:
         submit(sqlite_sessions, tile_poses=3)
         for user, password in (("hostA", "pwA"), ("hostB", "pwB")):

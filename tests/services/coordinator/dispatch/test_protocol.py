@@ -61,7 +61,7 @@ def dispatcher(
 
 @pytest.fixture
 def client(dispatcher: Dispatcher) -> Iterator[zenoh.Session]:
-    endpoint = dispatcher.zs.listen[0]
+    endpoint = dispatcher.zenoh_settings.listen[0]
     session = zenoh.open(zenoh_config(mode="client", connect=[endpoint]))
     yield session
     session.close()
@@ -226,7 +226,7 @@ def test_lost_worker_token_requeues_its_tiles_at_once(
     client: zenoh.Session, dispatcher: Dispatcher, any_sessions: sessionmaker[Session]
 ) -> None:
     submit(any_sessions, tile_poses=3)
-    worker = zenoh.open(zenoh_config(mode="client", connect=dispatcher.zs.listen))
+    worker = zenoh.open(zenoh_config(mode="client", connect=dispatcher.zenoh_settings.listen))
     token = worker.liveliness().declare_token(keys.alive_key("w-gone"))
     (tile,) = lease(worker, "w-gone")
     worker.close()  # the token vanishes with the session, as with kill -9
@@ -329,10 +329,12 @@ def test_a_timed_out_batch_is_sent_again_until_acknowledged_stored_and_evaluated
 
     exploration_id = submit(any_sessions, tile_poses=3)
     timeout_s = 0.4
-    config = WorkerConfig(connect=dispatcher.zs.listen, procs=1, name="slow", instant=True,
+    config = WorkerConfig(connect=dispatcher.zenoh_settings.listen,
+                          procs=1, name="slow", instant=True,
                           query_timeout_s=timeout_s, backoff_min_s=0.05, backoff_max_s=0.2)
     worker = WorkerProcess(config, 0)
-    worker.session = zenoh.open(zenoh_config(mode="client", connect=dispatcher.zs.listen))
+    worker.session = zenoh.open(
+        zenoh_config(mode="client", connect=dispatcher.zenoh_settings.listen))
     evaluated: list[str] = []
     evaluate = worker._evaluate
 
@@ -393,10 +395,12 @@ def instant_worker(dispatcher: Dispatcher, name: str):  # -> WorkerProcess
     from graspscape.workers.runtime.config import WorkerConfig
     from graspscape.workers.runtime.process import WorkerProcess
 
-    config = WorkerConfig(connect=dispatcher.zs.listen, procs=1, name=name, instant=True,
+    config = WorkerConfig(connect=dispatcher.zenoh_settings.listen,
+                          procs=1, name=name, instant=True,
                           query_timeout_s=5, backoff_min_s=0.05, backoff_max_s=0.2)
     worker = WorkerProcess(config, 0)
-    worker.session = zenoh.open(zenoh_config(mode="client", connect=dispatcher.zs.listen))
+    worker.session = zenoh.open(
+        zenoh_config(mode="client", connect=dispatcher.zenoh_settings.listen))
     return worker
 
 
