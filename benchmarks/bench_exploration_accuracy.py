@@ -51,7 +51,10 @@ from graspscape.shared.specs.results import PoseResult
 from graspscape.workers.sim.configuration_inference import DonorPool, inferred
 from sqlalchemy import select
 
-from benchmarks._results import RESULTS_DIR, write_results
+try:
+    from benchmarks._results import RESULTS_DIR, write_results
+except ModuleNotFoundError:  # run as a script: benchmarks/ itself is on sys.path
+    from _results import RESULTS_DIR, write_results
 
 GRID = {"dtheta": math.radians(30), "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
 LEVELS = 1  # the default depth; --levels 2 writes exploration_accuracy_levels2.json

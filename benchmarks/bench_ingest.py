@@ -20,7 +20,7 @@ from pathlib import Path
 import psycopg
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # for tests.coordinator.helpers: the same results the tests use
+sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
 
 from graspscape.services.coordinator import db  # noqa: E402
 from graspscape.services.coordinator.exploration.scheduler import ingest_results  # noqa: E402
@@ -28,9 +28,9 @@ from graspscape.services.coordinator.exploration.service import create_explorati
 from graspscape.services.coordinator.store.models import ObjectRow  # noqa: E402
 from graspscape.services.coordinator.store.queue import lease_tiles  # noqa: E402
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec  # noqa: E402
-from tests.coordinator.helpers import fake_results  # noqa: E402
 
 from benchmarks._results import write_results  # noqa: E402
+from tests.factories import fake_results  # noqa: E402
 
 PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 LEASE_CHUNK = 16  # tiles a worker asks for at once

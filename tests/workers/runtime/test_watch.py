@@ -3,6 +3,7 @@ simulation process behind) and say in their log when the coordinator goes and co
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -78,8 +79,6 @@ def test_processes_stop_with_their_supervisor_and_log_the_coordinators_absence(
         assert "supervisor" in log_path.read_text()
     finally:
         for pid in [supervisor.pid, *child]:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
         coordinator.close()
