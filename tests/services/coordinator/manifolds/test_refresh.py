@@ -79,7 +79,7 @@ def test_a_map_picture_computes_the_map_once_and_the_refresh_is_noted_on_the_exp
         summaries = s.scalars(select(ManifoldRow.summary)
                               .where(ManifoldRow.exploration_id == eid)).all()
         assert summaries and not any({"final", "poses_done"} & set(m) for m in summaries)
-        for stale in (False, True):  # current, then as a database from before 0009 reads
+        for stale in (False, True):  # current, then as a database from before 0008 reads
             if stale:
                 row.manifolds_poses_done, row.manifolds_final = None, False
                 s.commit()

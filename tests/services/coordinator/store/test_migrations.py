@@ -81,7 +81,7 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
             return {
                 table: c.execute(text(f"SELECT {columns} FROM {table} ORDER BY id")).all()
                 for table, columns in (
-                    # the columns of 0005 (0009 adds the manifolds' refresh state)
+                    # the columns of 0005 (0008 adds the manifolds' refresh state)
                     ("explorations", "id, object_id, spec, status, tiles_total, poses_total, "
                                      "poses_done, viable_count, created_at, updated_at, "
                                      "started_at, finished_at"),

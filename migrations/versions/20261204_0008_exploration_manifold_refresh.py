@@ -7,7 +7,7 @@ them once more, from the same stored poses, to the same map. The keys left in ol
 are ignored. Plain ADD/DROP COLUMN, which SQLite (3.35+) does in place, so the explorations
 table keeps AUTOINCREMENT without a rebuild.
 
-Revision ID: 0009
+Revision ID: 0008
 Revises: 0007
 Create Date: 2026-12-04 10:00:00
 """
@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import sqlalchemy as sa
 from alembic import op
 
-revision: str = "0009"
+revision: str = "0008"
 down_revision: str | None = "0007"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
