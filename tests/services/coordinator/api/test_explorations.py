@@ -17,6 +17,7 @@ from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 
 from tests.factories import fake_results
+from tests.services.coordinator.conftest import RefusalApi
 
 SMALL_GRID = {"dtheta": 0.6, "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
 
@@ -124,12 +125,15 @@ def _spec(**changes: Any) -> dict[str, Any]:
     ],
 )
 def test_exploration_validation_errors(
-    client: TestClient, object_id: int, spec: dict[str, Any], fragment: str
+    refusals: RefusalApi, spec: dict[str, Any], fragment: str
 ) -> None:
-    response = client.post("/explorations", json=spec)
+    before = refusals.explorations()
+    if spec.get("object_id") == 1:  # _spec's placeholder: the module's object
+        spec = {**spec, "object_id": refusals.object_id}
+    response = refusals.client.post("/explorations", json=spec)
     assert response.status_code == 422, response.text
     assert fragment in str(response.json()["detail"])
-    assert client.get("/explorations").json()["total"] == 0
+    assert refusals.explorations() == before
 
 
 def test_malformed_body_is_422(client: TestClient) -> None:
@@ -246,10 +250,10 @@ def test_poses_pagination_and_filters(
     ],
 )
 def test_pose_query_validation_errors(
-    client: TestClient, object_id: int, params: dict[str, Any], fragment: str
+    refusals: RefusalApi, params: dict[str, Any], fragment: str
 ) -> None:
-    eid = submit(client, object_id)["id"]
-    response = client.get(f"/explorations/{eid}/poses", params=params)
+    eid = refusals.exploration_id
+    response = refusals.client.get(f"/explorations/{eid}/poses", params=params)
     assert response.status_code == 422, response.text
     assert fragment in str(response.json()["detail"])
 
@@ -311,22 +315,24 @@ def test_service_refusals_use_the_validation_error_shape(client: TestClient) -> 
     ],
 )
 def test_non_finite_numbers_in_a_body_are_422(
-    client: TestClient, object_id: int, body: bytes, loc: list[Any]
+    refusals: RefusalApi, body: bytes, loc: list[Any]
 ) -> None:
     # Python's JSON parser takes NaN and Infinity; the 422 handler could not write them back
     # (a 500), and a number without bounds would have been stored.
-    response = client.post("/explorations", content=body.replace(b"OBJ", str(object_id).encode()),
-                           headers={"content-type": "application/json"})
+    before = refusals.explorations()
+    response = refusals.client.post(
+        "/explorations", content=body.replace(b"OBJ", str(refusals.object_id).encode()),
+        headers={"content-type": "application/json"})
     assert response.status_code == 422, response.text
     (error,) = response.json()["detail"]
     assert error["loc"] == loc and error["msg"] == "Input should be a finite number"
-    assert client.get("/explorations").json()["total"] == 0
+    assert refusals.explorations() == before
 
 
 @pytest.mark.parametrize(("field", "value"), [("mass_kg", "nan"), ("friction", "inf"),
                                               ("scale", "-inf"), ("mass_kg", "1e999")])
-def test_non_finite_form_numbers_are_422(client: TestClient, field: str, value: str) -> None:
-    response = client.post("/objects", data={"name": "sphere", field: value})
+def test_non_finite_form_numbers_are_422(refusals: RefusalApi, field: str, value: str) -> None:
+    response = refusals.client.post("/objects", data={"name": "sphere", field: value})
     assert response.status_code == 422, response.text
     (error,) = response.json()["detail"]
     assert error["loc"] == ["body", field] and "finite" in error["msg"]
@@ -343,10 +349,9 @@ def test_non_finite_form_numbers_are_422(client: TestClient, field: str, value: 
     ],
 )
 def test_non_finite_query_numbers_are_422(
-    client: TestClient, object_id: int, path: str, params: dict[str, Any]
+    refusals: RefusalApi, path: str, params: dict[str, Any]
 ) -> None:
-    eid = submit(client, object_id)["id"]
-    response = client.get(path.format(eid=eid), params=params)
+    response = refusals.client.get(path.format(eid=refusals.exploration_id), params=params)
     assert response.status_code == 422, response.text
     assert "finite" in str(response.json()["detail"])
 
@@ -490,8 +495,9 @@ def test_exploration_and_tile_ids_are_never_reused_after_delete(
      ("DELETE", "/objects"), ("POST", "/explorations/1/poses"), ("PUT", "/healthz")],
 )
 def test_405_allow_header_lists_the_documented_methods(
-    client: TestClient, method: str, path: str
+    refusals: RefusalApi, method: str, path: str
 ) -> None:
+    client = refusals.client
     from starlette.routing import compile_path
 
     documented = {

@@ -25,11 +25,15 @@ from tests.factories import oracle_result
 
 GRID = {"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02, "dr": 0.01,
         "attitudes": {"rolls": 2}}
+# A smaller one where the number of rolls does not matter (the default-strategy check runs
+# two whole adaptive explorations).
+SMALL_GRID = {**GRID, "dtheta": math.radians(60), "attitudes": {"rolls": 1}}
 
 
-def _spec(object_id: int, strategy: dict | None = None, levels: int = 1) -> ExplorationSpec:
+def _spec(object_id: int, strategy: dict | None = None, levels: int = 1,
+          grid: dict = GRID) -> ExplorationSpec:
     extra = {} if strategy is None else {"strategy": strategy}
-    return ExplorationSpec(object_id=object_id, grid=GRID, refinement={"levels": levels},
+    return ExplorationSpec(object_id=object_id, grid=grid, refinement={"levels": levels},
                            **extra)
 
 
@@ -98,11 +102,12 @@ def test_random_is_seeded_in_range_and_within_its_budget(sessions, named_object,
 
 def test_adaptive_is_the_default_and_old_specs_parse_as_adaptive(sessions, named_object) -> None:
     object_id = named_object("sphere")
-    spec = _spec(object_id, levels=1)
+    spec = _spec(object_id, levels=1, grid=SMALL_GRID)
     assert spec.strategy.name == "adaptive"
     stored = spec.model_dump(mode="json")
     stored.pop("strategy")  # a spec stored before strategies existed
     assert ExplorationSpec.model_validate(stored) == spec
     _, evaluated_default, default = _explore(sessions, spec)
-    _, evaluated_named, named = _explore(sessions, _spec(object_id, {"name": "adaptive"}, 1))
+    _, evaluated_named, named = _explore(sessions, _spec(object_id, {"name": "adaptive"}, 1,
+                                                                SMALL_GRID))
     assert default == named and sorted(evaluated_default) == sorted(evaluated_named)
