@@ -123,6 +123,9 @@ def outcome_line(session: Session, exploration_id: int, stored: int, elapsed_s: 
                  f"{f'; and {more} other reasons' if more > 0 else ''}")
         if row.status != ExplorationStatus.CANCELLED:
             line += "; run the same command again to retry them"
+    if failures.poses_with_errors:
+        line += (f"; {failures.poses_with_errors} poses raised in simulation (stored with "
+                 "outcome error and the message)")
     return line
 
 

@@ -21,6 +21,7 @@ from graspscape.services.coordinator.exploration.schemas import (
     PoseOut,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.results import Outcome
 
 router = APIRouter(tags=["explorations"], route_class=FiniteJSONRoute)
 
@@ -162,6 +163,8 @@ def list_poses(
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     cursor: Annotated[int | None, Query(ge=0, le=2**31 - 1, description="next_cursor")] = None,
     viable: bool | None = None,
+    outcome: Annotated[Outcome | None, Query(description="only poses with this outcome, "
+                                             "e.g. error")] = None,
     manifold_id: Annotated[int | None, Query(ge=1, le=2**31 - 1)] = None,
     mu_min: Annotated[float | None, _float("μs ≥ this")] = None,
     mu_max: Annotated[float | None, _float("μs ≤ this")] = None,
@@ -174,6 +177,7 @@ def list_poses(
 ) -> Any:
     filters = PoseFilter(
         viable=viable,
+        outcome=outcome,
         manifold_id=manifold_id,
         mu_min=mu_min,
         mu_max=mu_max,

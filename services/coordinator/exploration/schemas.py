@@ -6,6 +6,7 @@ from datetime import datetime
 from typing import Any
 
 from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.results import Outcome
 from pydantic import BaseModel, ConfigDict, Field
 
 
@@ -45,6 +46,9 @@ class FailureReason(BaseModel):
 
 class FailureSummary(BaseModel):
     tiles: int = Field(description="tiles failed (after max_attempts)")
+    poses_with_errors: int = Field(
+        default=0, description="poses stored with outcome `error` (their evaluation raised; "
+        "GET /explorations/{id}/poses?outcome=error lists them with the message)")
     reasons: list[FailureReason] = Field(
         description="their distinct reasons, most frequent first (at most 20; the whole list "
         "is at /explorations/{id}/failures)")
@@ -130,12 +134,16 @@ class PoseOut(PoseValues):
         default=None, description="pull along the approach axis at which the object slips, N")
     shake_survival_s: float | None = Field(
         default=None, description="time into the shake at which the object falls off, s")
+    error: str | None = Field(
+        default=None, description="outcome `error` only: what the evaluation of this pose "
+        "raised")
 
 
 class PoseFilter(BaseModel):
     """Filters of GET /explorations/{id}/poses; every range is inclusive."""
 
     viable: bool | None = None
+    outcome: Outcome | None = None
     manifold_id: int | None = None
     mu_min: float | None = None
     mu_max: float | None = None

@@ -27,6 +27,7 @@ from graspscape.services.coordinator.store.models import (
     TileState,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.results import Outcome
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
@@ -152,9 +153,14 @@ def failure_summary(session: Session, *, exploration_id: int) -> FailureSummary:
         .group_by(TileRow.last_error)
         .order_by(func.count().desc(), TileRow.last_error)
     ).all()
+    errors = session.scalar(
+        select(func.count()).select_from(PoseRow)
+        .where(PoseRow.exploration_id == exploration_id, PoseRow.outcome == Outcome.ERROR.value)
+    )
     return FailureSummary(
         tiles=sum(n for _, n in counts),
         reasons=[FailureReason(reason=reason, tiles=n) for reason, n in counts[:_MAX_REASONS]],
+        poses_with_errors=errors or 0,
     )
 
 
@@ -208,6 +214,8 @@ def list_poses(
         query = query.where(PoseRow.id > cursor)
     if filters.viable is not None:
         query = query.where(PoseRow.viable == filters.viable)
+    if filters.outcome is not None:
+        query = query.where(PoseRow.outcome == filters.outcome.value)
     if filters.manifold_id is not None:
         query = query.where(PoseRow.manifold_id == filters.manifold_id)
     for column, name in (

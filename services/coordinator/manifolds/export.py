@@ -28,7 +28,7 @@ COLUMNS = (
     "pose_key", "theta", "phi", "r", "roll", "pitch", "yaw", "outcome", "viable", "mu_s",
     "effort_max_nm", "effective_r", "manifold", "source", "inferred_from", "links_in_contact",
     "grasp",
-    "signature", "eval_time_s", *POSE_METRIC_COLUMNS,
+    "signature", "eval_time_s", *POSE_METRIC_COLUMNS, "error",
 )
 
 
@@ -58,6 +58,7 @@ def pose_records(session: Session, exploration_id: int) -> list[dict[str, Any]]:
             "signature": json.dumps(row.signature, sort_keys=True) if row.signature else "",
             "eval_time_s": row.eval_time_s,
             **{name: getattr(row, name) for name in POSE_METRIC_COLUMNS},
+            "error": row.error or "",
         })
     return out
 

@@ -105,6 +105,7 @@ def _values(result: PoseResult, robustness: bool = True) -> tuple[Any, ...]:
         _json_text(result.grasp),
         result.eval_time_s,
         result.inferred_from,
+        result.error,
         result.mu_g,
         result.mu_f,
         result.mu_m,
@@ -144,6 +145,7 @@ _PER_POSE = (
     ("grasp", "text"),
     ("eval_time_s", "float8"),
     ("inferred_from", "varchar"),
+    ("error", "varchar"),
     *((name, "float8") for name in POSE_METRIC_COLUMNS),
 )
 # The robustness tests are chosen per exploration and off by default: a batch without any

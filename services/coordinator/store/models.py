@@ -207,6 +207,8 @@ class PoseRow(Base):
     eval_time_s: Mapped[float] = mapped_column(Float)
     # Shortcut 2: the pose whose outcome, μs and effort this one reuses (same tile and normal).
     inferred_from: Mapped[str | None] = mapped_column(String(128))
+    # Outcome `error` only: what the evaluation of this pose raised (PoseResult.error).
+    error: Mapped[str | None] = mapped_column(String(2000))
     # Static grasp metrics of the synthesized grasp (PoseResult.mu_g, mu_f, mu_m) and its
     # robustness margins and grasp tests (PoseResult.robustness, migration 0005): NULL where
     # the worker did not compute them (not chosen in SimSettings, or the pose was not held).

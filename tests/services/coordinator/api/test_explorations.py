@@ -13,6 +13,7 @@ from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.services.coordinator.store.workers import heartbeat
 from graspscape.shared.specs.exploration import PoseGridSpec
+from graspscape.shared.specs.results import Outcome, PoseResult
 from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -398,7 +399,7 @@ def test_failed_tiles_leave_an_exploration_incomplete_with_reasons_until_retried
     assert detail["status"] == "incomplete" and detail["finished_at"] is not None
     assert detail["poses_done"] == len(results) < detail["poses_total"]
     assert detail["progress"]["tiles"]["failed"] == 2 and detail["progress"]["eta_s"] == 0.0
-    assert detail["failures"] == {"tiles": 2, "reasons": [
+    assert detail["failures"] == {"tiles": 2, "poses_with_errors": 0, "reasons": [
         {"reason": "w8: lease expired on attempt 3 of 3", "tiles": 1},
         {"reason": "w9: RuntimeError: pybullet exploded", "tiles": 1},
     ]}
@@ -422,7 +423,7 @@ def test_failed_tiles_leave_an_exploration_incomplete_with_reasons_until_retried
     assert retried.json() == {"id": eid, "status": "running", "tiles_requeued": 2}
     detail = client.get(f"/explorations/{eid}").json()
     assert detail["status"] == "running" and detail["finished_at"] is None
-    assert detail["failures"] == {"tiles": 0, "reasons": []}
+    assert detail["failures"] == {"tiles": 0, "poses_with_errors": 0, "reasons": []}
     assert detail["progress"]["tiles"]["queued"] == 2
     assert client.get(f"/explorations/{eid}/failures").json()["total"] == 0
     again = client.post(f"/explorations/{eid}/retry")
@@ -449,9 +450,9 @@ def test_an_exploration_whose_tiles_all_failed_without_a_pose_is_failed(
     _fail(sessions, created["tiles_total"], "ObjectFetchError: mesh is not watertight")
     detail = client.get(f"/explorations/{eid}").json()
     assert detail["status"] == "failed" and detail["poses_done"] == 0
-    assert detail["failures"] == {"tiles": created["tiles_total"], "reasons": [
-        {"reason": "w9: ObjectFetchError: mesh is not watertight",
-         "tiles": created["tiles_total"]}]}
+    reason = "w9: ObjectFetchError: mesh is not watertight"
+    assert detail["failures"] == {"tiles": created["tiles_total"], "poses_with_errors": 0,
+                                  "reasons": [{"reason": reason, "tiles": created["tiles_total"]}]}
     assert client.get("/explorations", params={"status": "failed"}).json()["total"] == 1
     assert 'graspscape_explorations{status="failed"} 1.0' in client.get("/metrics").text
     assert client.post(f"/explorations/{eid}/retry").json()["status"] == "running"
@@ -509,3 +510,38 @@ def test_405_allow_header_lists_the_documented_methods(
     response = client.request(method, path)
     assert response.status_code == 405
     assert response.headers["allow"] == ", ".join(sorted(documented))
+
+
+def test_a_pose_that_raised_is_stored_with_its_message_and_counted(
+    client: TestClient, object_id: int, sessions: sessionmaker[Session]
+) -> None:
+    """A worker isolates a pose whose evaluation raised (outcome `error`, the message): it is
+    stored like any pose, so the tile and the exploration finish, and it is shown."""
+    created = submit(client, object_id)
+    eid = created["id"]
+    message = "FloatingPointError: solver diverged"
+    stored = []
+    with sessions() as s:
+        while tiles := lease_tiles(s, worker_id="w1", n=4, lease_seconds=60):
+            for t in tiles:
+                results = fake_results(t.poses(), seed=t.tile_id)
+                first = results[0]
+                results[0] = PoseResult(pose=first.pose, pose_key=first.pose_key,
+                                        outcome=Outcome.ERROR, viable=False, mu_s=0.0,
+                                        error=message)
+                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                               worker_id="w1", results=results)
+                stored.append(first.pose_key)
+    detail = client.get(f"/explorations/{eid}").json()
+    assert detail["status"] == "done" and detail["poses_done"] == detail["poses_total"]
+    assert detail["failures"]["poses_with_errors"] == len(stored) == created["tiles_total"]
+    errors = client.get(f"/explorations/{eid}/poses",
+                        params={"outcome": "error", "limit": 1000}).json()["items"]
+    assert sorted(p["pose_key"] for p in errors) == sorted(stored)
+    assert all(p["error"] == message and not p["viable"] for p in errors)
+    held = client.get(f"/explorations/{eid}/poses", params={"outcome": "held"}).json()["items"]
+    assert held and all(p["outcome"] == "held" and p["error"] is None for p in held)
+    csv_text = client.get(f"/explorations/{eid}/export/poses.csv").text
+    assert csv_text.splitlines()[0].endswith(",error") and csv_text.count(message) == len(stored)
+    assert client.get(f"/explorations/{eid}/poses",
+                      params={"outcome": "exploded"}).status_code == 422

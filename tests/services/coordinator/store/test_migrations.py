@@ -55,6 +55,7 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     from graspscape.services.coordinator.exploration.scheduler import ingest_results
     from graspscape.services.coordinator.exploration.service import create_exploration
     from graspscape.services.coordinator.objects.service import create_named
+    from graspscape.services.coordinator.store.models import PoseRow
     from graspscape.services.coordinator.store.queue import lease_tiles
     from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
     from sqlalchemy import text
@@ -85,7 +86,10 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
                     ("explorations", "id, object_id, spec, status, tiles_total, poses_total, "
                                      "poses_done, viable_count, created_at, updated_at, "
                                      "started_at, finished_at"),
-                    ("poses", "*"), ("objects", "*"),
+                    # the columns of 0005 (0009 adds `error`)
+                    ("poses", ", ".join(c.name for c in PoseRow.__table__.columns
+                                        if c.name != "error")),
+                    ("objects", "*"),
                     # the columns of 0005 (0007 adds `round`)
                     ("tiles", 'id, exploration_id, level, "index", cells, r_levels, attitudes, '
                               "n_poses, state, lease_owner, lease_expires_at, lease_epoch, "
