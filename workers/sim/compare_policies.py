@@ -76,7 +76,7 @@ GRIDS = {
 
 def cell_volume_cm3(mesh, grid: PoseGrid, pose: Pose) -> float:
     import numpy as np
-    from graspscape.workers.sim.placement import direction, point_at_gap
+    from graspscape.shared.specs.placement import direction, point_at_gap
 
     u = direction(pose.theta, pose.phi)
     rho1 = float(np.linalg.norm(point_at_gap(mesh, u, max(pose.r - grid.gap_step_m / 2, 0.0))))

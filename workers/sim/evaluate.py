@@ -21,6 +21,7 @@ import numpy as np
 import pybullet as p
 from graspscape.shared.specs.gripper import GripperSpec, load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
+from graspscape.shared.specs.placement import place_gripper
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
     GraspConfiguration,
@@ -49,7 +50,6 @@ from graspscape.workers.sim.objects import (
     prepare_object,
     spawn_object,
 )
-from graspscape.workers.sim.placement import place_gripper
 from graspscape.workers.sim.policies import get_policy
 from graspscape.workers.sim.render import render_scene
 from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, run_tests

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from graspscape.shared.specs.placement import place_gripper
 from graspscape.shared.specs.pose import Pose
 from graspscape.workers.sim.geometry import axis_rotation
-from graspscape.workers.sim.placement import place_gripper
 
 CUBE = trimesh.creation.box(extents=(0.06, 0.06, 0.06))
 SPHERE = trimesh.creation.icosphere(subdivisions=4, radius=0.04)
