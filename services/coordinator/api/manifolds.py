@@ -7,9 +7,11 @@ routes answer for running explorations too; `final` says whether the exploration
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Path, Query, Response
+from fastapi import APIRouter, Path, Query, Request, Response
+from fastapi.responses import StreamingResponse
 from graspscape.services.coordinator.api.deps import SessionDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import error
@@ -166,29 +168,36 @@ def map_svg(exploration_id: Id, session: SessionDep, cut: Cut = "horizontal", ph
     return _picture(exploration_id, session, "svg", cut, phi0_deg, attitude)
 
 
-def _records(exploration_id: int, session: Any) -> list[dict[str, Any]]:
+def _stream_poses(exploration_id: int, request: Request, session: Any,
+                  fmt: export.PoseFormat) -> StreamingResponse:
+    """Every pose, streamed chunk by chunk from a server-side cursor, in a session of its own
+    (the request's closes when the route returns, before the body is sent)."""
     manifolds.ensure_manifolds(session, exploration_id)
-    return export.pose_records(session, exploration_id)
+    sessionmaker = request.app.state.sessionmaker
+
+    def pieces() -> Iterator[bytes]:
+        with sessionmaker() as own:
+            yield from export.pose_pieces(own, exploration_id, fmt)
+
+    return StreamingResponse(pieces(), media_type=export.MEDIA_TYPES[fmt])
 
 
-@router.get("/explorations/{exploration_id}/export/poses.csv", response_class=Response,
+@router.get("/explorations/{exploration_id}/export/poses.csv", response_class=StreamingResponse,
             responses={**_NOT_FOUND, 200: {"content": {"text/csv": {}}, "description": "CSV"}},
             summary="Every pose with its outcome, μs and manifold, CSV")
-def export_csv(exploration_id: Id, session: SessionDep) -> Response:
-    data = export.poses_csv(_records(exploration_id, session))
-    return Response(content=data, media_type="text/csv")
+def export_csv(exploration_id: Id, request: Request, session: SessionDep) -> StreamingResponse:
+    return _stream_poses(exploration_id, request, session, "csv")
 
 
 @router.get(
     "/explorations/{exploration_id}/export/poses.parquet",
-    response_class=Response,
+    response_class=StreamingResponse,
     responses={**_NOT_FOUND,
                200: {"content": {"application/vnd.apache.parquet": {}}, "description": "Parquet"}},
     summary="Every pose with its outcome, μs and manifold, Parquet",
 )
-def export_parquet(exploration_id: Id, session: SessionDep) -> Response:
-    data = export.poses_parquet(_records(exploration_id, session))
-    return Response(content=data, media_type="application/vnd.apache.parquet")
+def export_parquet(exploration_id: Id, request: Request, session: SessionDep) -> StreamingResponse:
+    return _stream_poses(exploration_id, request, session, "parquet")
 
 
 @router.get("/explorations/{exploration_id}/export/manifolds.json",

@@ -87,9 +87,8 @@ def _export(args: argparse.Namespace) -> int:
             items = stored_manifolds(session, args.exploration_id)
             args.out.write_text(json.dumps([m.model_dump(mode="json") for m in items], indent=2))
         else:
-            records = export.pose_records(session, args.exploration_id)
-            data = export.poses_csv(records) if args.what == "poses.csv" else export.poses_parquet(
-                records)
-            args.out.write_bytes(data)
+            with args.out.open("wb") as out:  # streamed in chunks, as the REST export
+                export.write_poses(session, args.exploration_id,
+                                   "csv" if args.what == "poses.csv" else "parquet", out)
     print(args.out)
     return 0
