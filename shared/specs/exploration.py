@@ -197,8 +197,34 @@ class RandomStrategySpec(BaseModel):
     rounds: int = Field(default=1, ge=1, le=100, description="rounds the budget is split into")
 
 
+class CmaesStrategySpec(BaseModel):
+    """CMA-ES (the `cma` package) over the continuous pose space, maximising each pose's
+    quality, with IPOP restarts; `poses` evaluations in all, asked a generation (one round)
+    at a time and repeatable from `seed`
+    (services/coordinator/exploration/strategies/cmaes.py)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: Literal["cmaes"]
+    poses: int = Field(default=1000, ge=1, le=1_000_000, description="evaluation budget")
+    seed: int = Field(default=0, ge=0, le=2**31 - 1)
+    popsize: int | None = Field(
+        default=None, ge=4, le=1000,
+        description="poses per generation of the first run (None: cma's 4 + 3 ln n); IPOP "
+        "doubles it at every restart")
+    sigma0: float = Field(
+        default=0.4, gt=0.0, le=2.0,
+        description="initial step size, in units of the unit approach vector, of the r range "
+        "and of one full roll turn")
+    objective: Literal["rank", "mu_s"] = Field(
+        default="rank",
+        description="'rank': the default rank metric of /best (the torque margin ratio) where "
+        "stored on the pose, else μs; 'mu_s': μs. A non-viable pose scores 0")
+
+
 StrategySpec = Annotated[
-    AdaptiveStrategySpec | GridStrategySpec | RandomStrategySpec, Field(discriminator="name")
+    AdaptiveStrategySpec | GridStrategySpec | RandomStrategySpec | CmaesStrategySpec,
+    Field(discriminator="name"),
 ]
 
 
@@ -235,7 +261,8 @@ class ExplorationSpec(BaseModel):
         default_factory=AdaptiveStrategySpec,
         description="how the pose space is explored, by name: 'adaptive' (the default: coarse "
         "grid, refinement, shortcuts, local search), 'grid' (the dense grid at the finest "
-        "level) or 'random' (a seeded uniform sample of `poses` poses)",
+        "level), 'random' (a seeded uniform sample of `poses` poses) or 'cmaes' (CMA-ES with "
+        "restarts, `poses` evaluations)",
     )
 
     @field_validator("gripper")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from graspscape.services.coordinator.exploration.strategies.adaptive import AdaptiveStrategy
 from graspscape.services.coordinator.exploration.strategies.base import Strategy
+from graspscape.services.coordinator.exploration.strategies.cmaes import CmaesStrategy
 from graspscape.services.coordinator.exploration.strategies.grid import GridStrategy
 from graspscape.services.coordinator.exploration.strategies.random import RandomStrategy
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -12,6 +13,7 @@ _BY_NAME: dict[str, type] = {
     "adaptive": AdaptiveStrategy,
     "grid": GridStrategy,
     "random": RandomStrategy,
+    "cmaes": CmaesStrategy,
 }
 
 
