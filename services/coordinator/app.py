@@ -19,7 +19,15 @@ from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from graspscape.services.coordinator import db
-from graspscape.services.coordinator.api import explorations, health, manifolds, objects, workers
+from graspscape.services.coordinator.api import (
+    budget,
+    datasets,
+    explorations,
+    health,
+    manifolds,
+    objects,
+    workers,
+)
 from graspscape.services.coordinator.api.finite import validation_error_handler
 from graspscape.services.coordinator.errors import CoordinatorError, InvalidInput
 from graspscape.services.coordinator.metrics import Metrics
@@ -131,7 +139,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 exc.headers = {**(exc.headers or {}), "Allow": ", ".join(methods)}
         return await http_exception_handler(request, exc)
 
-    for router in (objects.router, explorations.router, workers.router, health.router):
+    for router in (objects.router, explorations.router, budget.router, workers.router,
+                   health.router):
         app.include_router(router)
     app.include_router(manifolds.router)
+    app.include_router(datasets.router)
     return app
