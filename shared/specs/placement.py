@@ -14,7 +14,7 @@ object's symmetries are symmetries of the start poses.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
@@ -83,18 +83,29 @@ def _reference_rotation(z: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
-def place_gripper(mesh: trimesh.Trimesh, pose: Pose) -> Placement:
-    u = direction(pose.theta, pose.phi)
-    position = point_at_gap(mesh, u, pose.r)
+def approach_placement(mesh: trimesh.Trimesh, theta: float, phi: float,
+                       r: float) -> Placement:
+    """The start pose of a pose without its attitude (roll = pitch = yaw = 0): the costly
+    part, shared by every attitude of one approach point."""
+    u = direction(theta, phi)
+    position = point_at_gap(mesh, u, r)
     nearest, gap = nearest_surface_point(mesh, position)
     if gap > 1e-6:
         normal = (position - nearest) / gap
     else:  # touching: use the face normal there
         _, _, face = trimesh.proximity.closest_point(mesh, position[None, :])
         normal = mesh.face_normals[face[0]]
-    base = _reference_rotation(-normal, u)
+    return Placement(position=position, rotation=_reference_rotation(-normal, u),
+                     nearest_point=nearest, surface_normal=normal, gap=gap)
+
+
+def with_attitude(approach: Placement, roll: float, pitch: float, yaw: float) -> Placement:
+    """`approach` (an attitude-free placement) turned to an attitude."""
     # Attitude: roll about the palm normal, then pitch (about gripper y) and yaw (about x).
-    attitude = Rotation.from_euler("ZYX", [pose.roll, pose.pitch, pose.yaw]).as_matrix()
-    rotation = base @ attitude
-    return Placement(position=position, rotation=rotation, nearest_point=nearest,
-                     surface_normal=normal, gap=gap)
+    attitude = Rotation.from_euler("ZYX", [roll, pitch, yaw]).as_matrix()
+    return replace(approach, rotation=approach.rotation @ attitude)
+
+
+def place_gripper(mesh: trimesh.Trimesh, pose: Pose) -> Placement:
+    return with_attitude(approach_placement(mesh, pose.theta, pose.phi, pose.r),
+                         pose.roll, pose.pitch, pose.yaw)

@@ -2,12 +2,15 @@
 
   graspscape map show ID [-o map.png|map.svg] [--cut vertical --phi0 90] [--attitude 0]
   graspscape map export ID --what poses.csv|poses.parquet|manifolds.json -o FILE
+  graspscape map export ID --what graspgen.json|acronym.h5|object.obj -o FILE
   graspscape map run --object mug [--dtheta 30 --levels 2 …] -o map.png [--db run.db]
 
 `show` and `export` read the coordinator's database (--database-url, default: the
-coordinator's settings); `run` (graspscape.services.local.map_run, which needs the workers)
-explores an object in this process (pybullet, SQLite) with the same store code as the
-coordinator and writes the map and the manifold table.
+coordinator's settings); the grasp datasets (graspgen.json, acronym.h5 and the object mesh
+they name) are services/coordinator/datasets' (docs/datasets.md). `run`
+(graspscape.services.local.map_run, which needs the workers) explores an object in this
+process (pybullet, SQLite) with the same store code as the coordinator and writes the map and
+the manifold table.
 """
 
 from __future__ import annotations
@@ -16,6 +19,10 @@ import argparse
 import json
 from pathlib import Path
 from typing import Any
+
+# The grasp datasets' names (services/coordinator/datasets/formats.py, which imports h5py:
+# loaded only when one is written).
+DATASETS = ("graspgen.json", "acronym.h5", "object.obj")
 
 
 def register(subparsers: Any) -> Any:
@@ -32,10 +39,11 @@ def register(subparsers: Any) -> Any:
     show.add_argument("--database-url", default=None)
     show.set_defaults(handler=_show)
 
-    exp = sub.add_parser("export", help="export poses (CSV, Parquet) or the manifold table")
+    exp = sub.add_parser("export", help="export poses (CSV, Parquet), the manifold table or a "
+                         "grasp dataset (GraspGen JSON, ACRONYM-style HDF5)")
     exp.add_argument("exploration_id", type=int)
-    exp.add_argument("--what", choices=["poses.csv", "poses.parquet", "manifolds.json"],
-                     default="poses.csv")
+    exp.add_argument("--what", choices=["poses.csv", "poses.parquet", "manifolds.json",
+                                        *DATASETS], default="poses.csv")
     exp.add_argument("-o", "--out", type=Path, required=True)
     exp.add_argument("--database-url", default=None)
     exp.set_defaults(handler=_export)
@@ -73,7 +81,25 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export_dataset(args: argparse.Namespace) -> int:
+    from graspscape.services.coordinator.datasets.formats import FORMATS
+
+    # Written beside the target and renamed at the end: a refusal halfway leaves no torn file.
+    part = args.out.with_name(args.out.name + ".part")
+    try:
+        with _sessions(args.database_url)() as session, part.open("w+b") as out:  # h5py reads back
+            rows = FORMATS[args.what].write(session, args.exploration_id, out)
+    except BaseException:
+        part.unlink(missing_ok=True)
+        raise
+    part.replace(args.out)
+    print(f"{args.out}: {rows} {'faces' if args.what == 'object.obj' else 'poses'}")
+    return 0
+
+
 def _export(args: argparse.Namespace) -> int:
+    if args.what in DATASETS:
+        return _export_dataset(args)
     from graspscape.services.coordinator.manifolds import export
     from graspscape.services.coordinator.manifolds.service import (
         ensure_manifolds,
