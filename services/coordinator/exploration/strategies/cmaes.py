@@ -18,17 +18,21 @@ stalled for STALL generations, it restarts from a new
 random mean with a new seed and a doubled population (IPOP). The budget `poses` counts every
 asked pose; the last generation is cut to what is left, and is not told.
 
-State. Nothing is kept between batches: `next_round` replays every finished generation from
-the seed, telling each the qualities the store holds for its poses (a missing pose, whose
-tile failed, scores 0), then asks the next one. The run is therefore a function of the spec
-and the stored results, whatever the workers, interleaving or coordinator restarts; the
-replay costs O(generations²) ask/tell steps over a run (docs/exploration.md). Poses are off
-the lattice: stored, listed, exported and ranked by /best, not grouped into manifolds.
+State. `next_round` replays every finished generation from the seed, telling each the
+qualities the store holds for its poses (a missing pose, whose tile failed, scores 0), then
+asks the next one. The run is therefore a function of the spec and the stored results,
+whatever the workers, interleaving or coordinator restarts. A replay from the seed costs
+O(generations) ask/tell steps, so the last replay's search is kept in memory and resumed
+when the qualities it was told are still the stored ones: the same search, sooner. Poses are
+off the lattice: stored, listed, exported and ranked by /best, not grouped into manifolds.
 """
 
 from __future__ import annotations
 
+import copy
 import math
+import threading
+from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -92,6 +96,17 @@ def quality(row: Any, objective: str) -> float:
 
 
 @dataclass
+class _Normal:
+    """cma's `randn` from a generator of our own (an object, not a closure, so that a copied
+    search draws from a copied generator)."""
+
+    rng: np.random.Generator
+
+    def __call__(self, *shape: int) -> np.ndarray:
+        return self.rng.standard_normal(shape)
+
+
+@dataclass
 class _Search:
     """One CMA-ES run after another (IPOP), replayed from the seed."""
 
@@ -114,7 +129,7 @@ class _Search:
         opts = {
             # Our own generator, not numpy's global one (which cma would seed and draw from):
             # the run must not depend on what else in the process draws random numbers.
-            "randn": lambda *shape: rng.standard_normal(shape), "seed": math.nan,
+            "randn": _Normal(rng), "seed": math.nan,
             "popsize": min(MAX_POPSIZE, popsize * 2**self.restart),
             "tolx": TOL_X, "tolfun": TOL_FUN,
             "verbose": -9, "verb_log": 0, "verb_disp": 0, "verb_filenameprefix": "",
@@ -146,21 +161,64 @@ class _Search:
             self.es = self._start()
 
 
-def generation(spec: ExplorationSpec, g: int, quality_of: Callable[[str], float],
-               skip: Callable[[str], bool] = lambda key: False) -> tuple[int, list[Pose]]:
-    """Replay generations 0 … g − 1 (telling each the qualities of its poses), then ask on
-    until a generation has a pose for which `skip` is false: (its index, its poses), or
-    (index, []) when the budget is spent."""
+@dataclass
+class _Snapshot:
+    """A search after telling `told` generations: (pose keys, qualities) each."""
+
+    search: _Search
+    told: list[tuple[list[str], list[float]]]
+
+
+# Searches as the last replay left them, per exploration. Only a speed-up: a snapshot is used
+# when the qualities it was told are still what the store says, and the search is a function
+# of the spec and of those, so resuming equals replaying from the seed.
+_SNAPSHOTS: OrderedDict[str, _Snapshot] = OrderedDict()
+_SNAPSHOTS_KEPT = 16
+_LOCK = threading.Lock()
+
+
+def _resume(cache_key: str | None, spec: ExplorationSpec, g: int,
+            quality_of: Callable[[str], float]) -> tuple[_Search, list]:
+    with _LOCK:
+        snap = _SNAPSHOTS.get(cache_key) if cache_key is not None else None
+    if snap is not None and len(snap.told) <= g and all(
+            quality_of(key) == q
+            for keys, qs in snap.told for key, q in zip(keys, qs, strict=True)):
+        return copy.deepcopy(snap.search), list(snap.told)
     strategy = spec.strategy
     assert isinstance(strategy, CmaesStrategySpec)
-    search = _Search(spec, strategy)
-    k = 0
+    return _Search(spec, strategy), []
+
+
+def _keep(cache_key: str | None, snap: _Snapshot) -> None:
+    if cache_key is None:
+        return
+    with _LOCK:
+        _SNAPSHOTS[cache_key] = snap
+        _SNAPSHOTS.move_to_end(cache_key)
+        while len(_SNAPSHOTS) > _SNAPSHOTS_KEPT:
+            _SNAPSHOTS.popitem(last=False)
+
+
+def generation(spec: ExplorationSpec, g: int, quality_of: Callable[[str], float],
+               skip: Callable[[str], bool] = lambda key: False,
+               cache_key: str | None = None) -> tuple[int, list[Pose]]:
+    """Replay generations 0 … g − 1 (telling each the qualities of its poses), then ask on
+    until a generation has a pose for which `skip` is false: (its index, its poses), or
+    (index, []) when the budget is spent. With `cache_key`, resume from the last replay's
+    snapshot under that key where it still holds."""
+    search, told = _resume(cache_key, spec, g, quality_of)
     while True:
+        before = copy.deepcopy(search) if len(told) >= g else None
         xs, poses = search.ask()
-        if not poses or (k >= g and not all(skip(p.key()) for p in poses)):
-            return k, poses
-        search.tell(xs, [quality_of(p.key()) for p in poses])
-        k += 1
+        if not poses or (before is not None and not all(skip(p.key()) for p in poses)):
+            if before is not None:
+                _keep(cache_key, _Snapshot(before, told))
+            return len(told), poses
+        keys = [p.key() for p in poses]
+        qualities = [quality_of(key) for key in keys]
+        search.tell(xs, qualities)
+        told.append((keys, qualities))
 
 
 class CmaesStrategy:
@@ -192,7 +250,8 @@ class CmaesStrategy:
         # A generation whose poses are all stored or planned already (a repeat, down to the
         # key's 1e-6) is told from the store and skipped: queueing nothing would end the run.
         k, poses = generation(self.spec, done, lambda key: stored.get(key, 0.0),
-                              skip=lambda key: key in stored or key in planned)
+                              skip=lambda key: key in stored or key in planned,
+                              cache_key=f"{eid}:{self.spec.model_dump_json()}")
         return [Planned(pose, plan_level=0, tile_level=0, reason="cmaes", round=k,
                         counted=False) for pose in poses]
 

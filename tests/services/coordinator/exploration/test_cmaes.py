@@ -9,7 +9,11 @@ import math
 import numpy as np
 import pytest
 from graspscape.services.coordinator.exploration.service import create_exploration
-from graspscape.services.coordinator.exploration.strategies.cmaes import decode, fold
+from graspscape.services.coordinator.exploration.strategies.cmaes import (
+    decode,
+    fold,
+    generation,
+)
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
 from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -115,3 +119,20 @@ def test_oracle_best_is_what_the_oracle_gives() -> None:
     """The bound the search is measured against, from the oracle itself."""
     near_pole = oracle_result(Pose(theta=1e-3, phi=math.pi / 2, r=0.01))
     assert near_pole.viable and near_pole.mu_s == pytest.approx(ORACLE_BEST_MU_S, abs=1e-6)
+
+
+def test_resuming_the_kept_search_equals_replaying_from_the_seed() -> None:
+    spec = ExplorationSpec(object_id=1, grid=GRID,
+                           strategy={"name": "cmaes", "poses": 10_000, "seed": 4})
+    rng = np.random.default_rng(0)
+    stored: dict[str, float] = {}
+    for g in range(40):
+        k, poses = generation(spec, g, lambda key: stored.get(key, 0.0), cache_key="t")
+        fresh = generation(spec, g, lambda key: stored.get(key, 0.0))
+        assert (k, [p.key() for p in poses]) == (fresh[0], [p.key() for p in fresh[1]])
+        stored.update((p.key(), float(rng.uniform())) for p in poses)
+    # A stored quality that differs from what the kept search was told: replayed, not resumed.
+    stored[next(iter(stored))] += 0.5
+    k, poses = generation(spec, 40, lambda key: stored.get(key, 0.0), cache_key="t")
+    fresh = generation(spec, 40, lambda key: stored.get(key, 0.0))
+    assert [p.key() for p in poses] == [p.key() for p in fresh[1]]
