@@ -36,7 +36,10 @@ class GraspSignature(BaseModel):
 
 
 class GraspConfiguration(BaseModel):
-    """The paper's (η_r(t_c), θ_g(t_c)): base pose in the object frame and joint angles."""
+    """The paper's (η_r(t_c), θ_g(t_c)): base pose in the object frame and joint angles.
+
+    The base pose is the gripper frame's (palm surface centre, z the palm normal) at the end of
+    closing, relative to the object's centre-of-mass frame at that instant (docs/datasets.md)."""
 
     model_config = ConfigDict(frozen=True)
 
