@@ -128,18 +128,11 @@ def best(
 
 def _picture(exploration_id: int, session: Any, fmt: Literal["png", "svg"], cut: str,
              phi0_deg: float, attitude: int) -> Response:
-    from graspscape.services.coordinator.maps.render import render_map
+    from graspscape.services.coordinator.maps.picture import picture_bytes
 
-    computed = manifolds.current_map(session, exploration_id)
-    if attitude >= len(computed.lattice.attitudes):
-        raise InvalidInput(
-            f"attitude {attitude} out of range: the grid has {len(computed.lattice.attitudes)}",
-            loc=("query", "attitude"))
-    data = render_map(
-        computed.lattice, computed.samples, computed.label_of, computed.map, computed.mesh,
-        cut=cut, phi0=math.radians(phi0_deg), attitude=attitude, fmt=fmt,  # type: ignore[arg-type]
-        title=f"exploration {exploration_id}",
-    )
+    data, _, _ = picture_bytes(session, exploration_id, fmt, cut=cut,  # type: ignore[arg-type]
+                               phi0_deg=phi0_deg, attitude=attitude,
+                               title=f"exploration {exploration_id}")
     media = "image/png" if fmt == "png" else "image/svg+xml"
     return Response(content=data, media_type=media)
 

@@ -37,7 +37,9 @@ COLUMNS = (
     "grasp",
     "signature", "eval_time_s", *POSE_METRIC_COLUMNS, "error",
 )
-CHUNK = 20_000  # rows per cursor fetch, CSV chunk and Parquet row group
+# Rows per cursor fetch, CSV chunk and Parquet row group: a chunk of rows with their parsed
+# JSON is ~5 KB a row in Python objects, so 5,000 rows keep an export near 25 MB.
+CHUNK = 5_000
 SPOOL_BYTES = 32 * 2**20
 BLOCK_BYTES = 2**20
 PoseFormat = Literal["csv", "parquet"]
@@ -55,29 +57,29 @@ _SELECTED = (
 _to_json = json.JSONEncoder(sort_keys=True).encode
 
 
-def _record(row: Any, labels: dict[int, str]) -> dict[str, Any]:
+def _row(row: Any, labels: dict[int, str]) -> tuple[Any, ...]:
+    """One pose as the export's values, in COLUMNS order."""
     signature, grasp = row.signature, row.grasp
-    return {
-        "pose_key": row.pose_key, "theta": row.theta, "phi": row.phi, "r": row.r,
-        "roll": row.roll, "pitch": row.pitch, "yaw": row.yaw, "outcome": row.outcome,
-        "viable": bool(row.viable), "mu_s": row.mu_s, "effort_max_nm": row.effort_max_nm,
-        "effective_r": row.effective_r,
-        "manifold": labels.get(row.manifold_id, "") if row.manifold_id else "",
-        "source": source_of(row.worker_id, row.inferred_from),
-        "inferred_from": row.inferred_from or "",
-        "links_in_contact": " ".join((signature or {}).get("links_in_contact", ())),
-        "grasp": _to_json(grasp) if grasp else "",
-        "signature": _to_json(signature) if signature else "",
-        "eval_time_s": row.eval_time_s,
-        **{name: getattr(row, name) for name in POSE_METRIC_COLUMNS},
-        "error": row.error or "",
-    }
+    return (
+        row.pose_key, row.theta, row.phi, row.r, row.roll, row.pitch, row.yaw, row.outcome,
+        bool(row.viable), row.mu_s, row.effort_max_nm, row.effective_r,
+        labels.get(row.manifold_id, "") if row.manifold_id else "",
+        source_of(row.worker_id, row.inferred_from),
+        row.inferred_from or "",
+        " ".join((signature or {}).get("links_in_contact", ())),
+        _to_json(grasp) if grasp else "",
+        _to_json(signature) if signature else "",
+        row.eval_time_s,
+        *(getattr(row, name) for name in POSE_METRIC_COLUMNS),
+        row.error or "",
+    )
 
 
-def record_chunks(session: Session, exploration_id: int,
-                  chunk: int | None = None) -> Iterator[list[dict[str, Any]]]:
-    """The export rows of every pose, by key, `chunk` at a time from one server-side cursor;
-    manifold labels from one small query (manifold id → letters), not one per row."""
+def row_chunks(session: Session, exploration_id: int,
+               chunk: int | None = None) -> Iterator[list[tuple[Any, ...]]]:
+    """The export rows (tuples in COLUMNS order) of every pose, by key, `chunk` at a time
+    from one server-side cursor; manifold labels from one small query (manifold id →
+    letters), not one per row."""
     labels = {
         mid: label_name(label)
         for mid, label in session.execute(
@@ -88,21 +90,16 @@ def record_chunks(session: Session, exploration_id: int,
     query = (select(*_SELECTED).where(PoseRow.exploration_id == exploration_id)
              .order_by(PoseRow.pose_key).execution_options(yield_per=chunk or CHUNK))
     for part in session.execute(query).partitions():
-        yield [_record(row, labels) for row in part]
+        yield [_row(row, labels) for row in part]
 
 
-def pose_records(session: Session, exploration_id: int) -> list[dict[str, Any]]:
-    """Every export row in memory at once (small explorations, tests)."""
-    return [r for part in record_chunks(session, exploration_id) for r in part]
-
-
-def csv_chunks(chunks: Iterator[list[dict[str, Any]]]) -> Iterator[bytes]:
+def csv_chunks(chunks: Iterator[list[tuple[Any, ...]]]) -> Iterator[bytes]:
     """The CSV text, header first, one encoded piece per chunk of rows."""
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    for records in chunks:
-        writer.writerows(records)
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(COLUMNS)
+    for rows in chunks:
+        writer.writerows(rows)
         yield buf.getvalue().encode()
         buf.seek(0)
         buf.truncate()
@@ -121,16 +118,19 @@ def _schema() -> Any:
     return pa.schema([(c, types.get(c, pa.string())) for c in COLUMNS])
 
 
-def write_parquet(chunks: Iterator[list[dict[str, Any]]], out: IO[bytes]) -> None:
-    """Parquet into `out`, one row group per chunk of rows."""
+def write_parquet(chunks: Iterator[list[tuple[Any, ...]]], out: IO[bytes]) -> None:
+    """Parquet into `out`, one row group per chunk of rows (built column by column)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     schema = _schema()
     with pq.ParquetWriter(out, schema) as writer:
         wrote = False
-        for records in chunks:
-            writer.write_table(pa.Table.from_pylist(records, schema=schema))
+        for rows in chunks:
+            columns = list(zip(*rows, strict=True)) if rows else [()] * len(COLUMNS)
+            writer.write_table(pa.Table.from_arrays(
+                [pa.array(col, type=f.type) for col, f in zip(columns, schema, strict=True)],
+                schema=schema))
             wrote = True
         if not wrote:  # no poses: the schema and an empty row group, as write_table makes
             writer.write_table(schema.empty_table())
@@ -140,7 +140,7 @@ def pose_pieces(session: Session, exploration_id: int, fmt: PoseFormat) -> Itera
     """Every pose of the exploration as CSV or Parquet, in pieces to send or write in turn.
     Parquet's footer comes last, so it is written (by row groups) into a temporary file that
     stays in memory up to SPOOL_BYTES, then read back in blocks."""
-    chunks = record_chunks(session, exploration_id)
+    chunks = row_chunks(session, exploration_id)
     if fmt == "csv":
         yield from csv_chunks(chunks)
         return
@@ -155,13 +155,3 @@ def write_poses(session: Session, exploration_id: int, fmt: PoseFormat, out: IO[
     """Every pose of the exploration as CSV or Parquet into `out` (a file), chunk by chunk."""
     for piece in pose_pieces(session, exploration_id, fmt):
         out.write(piece)
-
-
-def poses_csv(records: list[dict[str, Any]]) -> bytes:
-    return b"".join(csv_chunks(iter([records])))
-
-
-def poses_parquet(records: list[dict[str, Any]]) -> bytes:
-    buf = io.BytesIO()
-    write_parquet(iter([records]), buf)
-    return buf.getvalue()

@@ -1,31 +1,86 @@
 """One exploration's map picture and manifold table, straight from the store (used by the
-`map show` command and by `explore` when it finishes)."""
+`map.png`/`map.svg` routes, the `map show` command and `explore` when it finishes).
+
+The picture is drawn from the stored manifold table (brought up to date first, as every read
+does) and the poses' stored labels (`maps.points`), never by regrouping every pose on read;
+the bytes are kept for the last few (exploration, its version, cut) asked for, since a
+finished map does not change.
+"""
 
 from __future__ import annotations
 
 import json
 import math
+from collections import OrderedDict
 from pathlib import Path
 from typing import Literal
 
+from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.store.models import ExplorationRow
 from sqlalchemy.orm import Session
+
+Cut = Literal["horizontal", "vertical"]
+CACHED_PICTURES = 16
+_cache: OrderedDict[tuple[object, ...], tuple[bytes, int, int]] = OrderedDict()
+
+
+def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "svg"], *,
+                  cut: Cut = "horizontal", phi0_deg: float = 0.0, attitude: int = 0,
+                  title: str | None = None) -> tuple[bytes, int, int]:
+    """The map (PNG or SVG) with its manifold and lattice pose counts. Raises NotFound,
+    InvalidInput (an attitude the grid does not have)."""
+    from graspscape.services.coordinator.exploration.samples import lattice_of
+    from graspscape.services.coordinator.exploration.specs import spec_of
+    from graspscape.services.coordinator.manifolds.service import (
+        ensure_manifolds,
+        stored_manifolds,
+    )
+    from graspscape.services.coordinator.maps.points import stored_points
+    from graspscape.services.coordinator.maps.render import render_map
+    from graspscape.services.coordinator.objects.geometry import object_mesh
+
+    ensure_manifolds(session, exploration_id)
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    spec = spec_of(row)
+    lattice = lattice_of(spec)
+    if attitude >= len(lattice.attitudes):
+        raise InvalidInput(
+            f"attitude {attitude} out of range: the grid has {len(lattice.attitudes)}",
+            loc=("query", "attitude"))
+    if title is None:
+        title = f"{spec.label or ''}".strip()
+    # The version of what is drawn: the poses and the manifold table stored for them.
+    key = (str(session.get_bind().url), exploration_id, row.created_at, row.updated_at,
+           row.poses_done, row.manifolds_poses_done, row.manifolds_final, fmt, cut, phi0_deg,
+           attitude, title)
+    if key in _cache:
+        _cache.move_to_end(key)
+        return _cache[key]
+    points = stored_points(session, exploration_id, lattice)
+    manifolds = stored_manifolds(session, exploration_id)
+    data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),
+                      cut=cut, phi0=math.radians(phi0_deg), attitude=attitude, fmt=fmt,
+                      title=title)
+    _cache[key] = (data, len(manifolds), len(points))
+    while len(_cache) > CACHED_PICTURES:
+        _cache.popitem(last=False)
+    return _cache[key]
 
 
 def write_map_files(session: Session, exploration_id: int, picture: Path,
-                    table: Path | None = None, *, cut: Literal["horizontal", "vertical"] =
-                    "horizontal", phi0_deg: float = 0.0, attitude: int = 0) -> tuple[int, int]:
+                    table: Path | None = None, *, cut: Cut = "horizontal", phi0_deg: float = 0.0,
+                    attitude: int = 0) -> tuple[int, int]:
     """Writes the map (PNG or SVG by suffix) and optionally the manifold table (JSON);
     returns (manifolds, poses)."""
-    from graspscape.services.coordinator.manifolds.service import current_map, stored_manifolds
-    from graspscape.services.coordinator.maps.render import render_map
+    from graspscape.services.coordinator.manifolds.service import stored_manifolds
 
-    computed = current_map(session, exploration_id)
-    fmt = "svg" if picture.suffix.lower() == ".svg" else "png"
-    picture.write_bytes(render_map(
-        computed.lattice, computed.samples, computed.label_of, computed.map, computed.mesh,
-        cut=cut, phi0=math.radians(phi0_deg), attitude=attitude, fmt=fmt,
-        title=f"{computed.spec.label or ''}".strip()))
+    fmt: Literal["png", "svg"] = "svg" if picture.suffix.lower() == ".svg" else "png"
+    data, n_manifolds, n_poses = picture_bytes(session, exploration_id, fmt, cut=cut,
+                                               phi0_deg=phi0_deg, attitude=attitude)
+    picture.write_bytes(data)
     if table is not None:
         items = stored_manifolds(session, exploration_id)
         table.write_text(json.dumps([m.model_dump(mode="json") for m in items], indent=2))
-    return len(computed.map.manifolds), len(computed.samples)
+    return n_manifolds, n_poses

@@ -8,13 +8,14 @@ pose of the chosen attitude (in direction and r) and a μs interpolated (inverse
 among the nearby known poses of that label. Drawn like the paper's Fig. 2: manifolds coloured
 and lettered, the non-viable area hatched, μs level sets inside manifolds, local maxima as
 yellow dots (those within one coarse step of the plane), the object's outline in the plane.
+The 3D view shows the viable reference-point positions coloured by manifold (thinned beyond
+SCATTER_MAX markers). The poses come as arrays (`maps.points`) with their stored labels.
 """
 
 from __future__ import annotations
 
 import io
 import math
-from collections.abc import Mapping
 from typing import Any, Literal
 
 import matplotlib
@@ -22,14 +23,14 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.exploration.lattice import Lattice
 from graspscape.services.coordinator.manifolds.grouping import (
     FALLBACK_RADIUS,
     label_name,
     surface_radii,
 )
-from graspscape.services.coordinator.manifolds.summary import ManifoldMap
+from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.maps.points import MapPoints
 from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
 from scipy.spatial import cKDTree
@@ -38,6 +39,7 @@ Cut = Literal["horizontal", "vertical"]
 PIXELS = 260
 NEAREST = 6
 LEGEND_ENTRIES = 8
+SCATTER_MAX = 25_000  # markers in the 3D view (`_scattered`)
 _COLOURS = plt.get_cmap("tab10").colors
 
 
@@ -54,8 +56,7 @@ def _embed(dirs: np.ndarray, r: np.ndarray, lattice: Lattice) -> np.ndarray:
 
 def cut_field(
     lattice: Lattice,
-    samples: Mapping[Point, StoredPose],
-    label_of: Mapping[Point, int],
+    points: MapPoints,
     mesh: Any | None,
     *,
     cut: Cut = "horizontal",
@@ -81,18 +82,15 @@ def cut_field(
     dirs = (np.outer(np.cos(ang.ravel()), e1) + np.outer(np.sin(ang.ravel()), e2))
     labels = np.full(X.shape, np.nan)
     mu = np.full(X.shape, np.nan)
-    known = sorted(p for p in samples if p.attitude == attitude)
-    if known and inside.any():
-        kd = np.array([lattice.direction(p) for p in known])
-        kr = np.array([samples[p].r for p in known])
-        tree = cKDTree(_embed(kd, kr, lattice))
+    known = points.take(points.attitude == attitude)
+    if len(known) and inside.any():
+        tree = cKDTree(_embed(known.directions(lattice), known.r, lattice))
         idx = np.flatnonzero(inside.ravel())
         q = _embed(dirs[idx], r.ravel()[idx], lattice)
         k = min(NEAREST, len(known))
         dist, nn = tree.query(q, k=k)
         dist, nn = dist.reshape(len(idx), k), nn.reshape(len(idx), k)
-        klabel = np.array([label_of.get(p, -1) for p in known])
-        kmu = np.array([samples[p].mu_s for p in known])
+        klabel, kmu = known.label, known.mu_s
         first = klabel[nn[:, 0]]
         same = klabel[nn] == first[:, None]
         w = same / np.maximum(dist, 1e-9)
@@ -114,11 +112,11 @@ def _section(mesh: Any | None, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
         (0, 2, 2))
 
 
-def _draw_cut(ax: Any, field: dict[str, Any], mmap: ManifoldMap, lattice: Lattice,
-              samples: Mapping[Point, StoredPose], mesh: Any | None, title: str) -> None:
+def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
+              lattice: Lattice, mesh: Any | None, title: str) -> None:
     X, Y, labels, mu = field["X"], field["Y"], field["labels"], field["mu"]
     e1, e2 = field["e1"], field["e2"]
-    n = max(1, len(mmap.manifolds))
+    n = max(1, len(manifolds))
     cmap = ListedColormap([_COLOURS[i % 10] for i in range(n)])
     shown = np.ma.masked_invalid(np.where(labels >= 0, labels, np.nan))
     # Raster inside the SVG too: a vector cell per pixel would make a 10 MB file.
@@ -150,7 +148,7 @@ def _draw_cut(ax: Any, field: dict[str, Any], mmap: ManifoldMap, lattice: Lattic
                     fontsize=13, ha="center", va="center", zorder=5, weight="bold")
     normal = np.cross(e1, e2)
     band = lattice.dtheta(0)
-    for m in mmap.manifolds:
+    for m in manifolds:
         for pm in m.local_maxima:
             u = np.array([math.sin(pm.theta) * math.cos(pm.phi),
                           math.sin(pm.theta) * math.sin(pm.phi), math.cos(pm.theta)])
@@ -165,14 +163,29 @@ def _draw_cut(ax: Any, field: dict[str, Any], mmap: ManifoldMap, lattice: Lattic
     ax.set_xlabel("m")
 
 
-def _draw_3d(ax: Any, lattice: Lattice, samples: Mapping[Point, StoredPose],
-             label_of: Mapping[Point, int], mesh: Any | None) -> None:
-    pts = sorted(p for p in samples if samples[p].viable)
-    if pts:
-        dirs = np.array([lattice.direction(p) for p in pts])
-        rho = surface_radii(mesh, dirs, FALLBACK_RADIUS)
-        pos = dirs * (rho + np.array([samples[p].r for p in pts]))[:, None]
-        colours = [_COLOURS[label_of.get(p, 0) % 10] for p in pts]
+def _scattered(pts: MapPoints) -> MapPoints:
+    """The viable points the 3D view draws: all of them up to SCATTER_MAX; beyond, each
+    position once per label (attitudes share positions), then an even subset (every k-th in
+    point order) — a million markers in a 600-pixel panel only overdraw one another and cost
+    seconds each."""
+    if len(pts) <= SCATTER_MAX:
+        return pts
+    code = np.stack([pts.ring, pts.azimuth, pts.r_index, pts.label], axis=1)
+    _, first = np.unique(code, axis=0, return_index=True)
+    pts = pts.take(np.sort(first))
+    step = -(-len(pts) // SCATTER_MAX)
+    return pts.take(slice(None, None, step)) if step > 1 else pts
+
+
+def _draw_3d(ax: Any, lattice: Lattice, points: MapPoints, mesh: Any | None) -> None:
+    pts = _scattered(points.take(points.viable))
+    if len(pts):
+        dirs = pts.directions(lattice)
+        # One ray per direction, not per pose: many r levels and attitudes share one.
+        unique, inverse = np.unique(dirs, axis=0, return_inverse=True)
+        rho = surface_radii(mesh, unique, FALLBACK_RADIUS)[inverse.ravel()]
+        pos = dirs * (rho + pts.r)[:, None]
+        colours = [_COLOURS[i % 10] for i in np.where(pts.label >= 0, pts.label, 0).tolist()]
         ax.scatter(pos[:, 0], pos[:, 1], pos[:, 2], c=colours, s=6, depthshade=False,
                    rasterized=True)
     if mesh is not None and len(mesh.faces) <= 20000:
@@ -184,9 +197,8 @@ def _draw_3d(ax: Any, lattice: Lattice, samples: Mapping[Point, StoredPose],
 
 def render_map(
     lattice: Lattice,
-    samples: Mapping[Point, StoredPose],
-    label_of: Mapping[Point, int],
-    mmap: ManifoldMap,
+    points: MapPoints,
+    manifolds: list[ManifoldSummary],
     mesh: Any | None,
     *,
     cut: Cut = "horizontal",
@@ -196,22 +208,22 @@ def render_map(
     title: str = "",
     pixels: int = PIXELS,
 ) -> bytes:
-    field = cut_field(lattice, samples, label_of, mesh, cut=cut, phi0=phi0,
+    field = cut_field(lattice, points, mesh, cut=cut, phi0=phi0,
                       attitude=attitude, pixels=pixels)
     fig = plt.figure(figsize=(12, 5.6))
     ax = fig.add_subplot(1, 2, 1)
     roll = lattice.attitudes[attitude][0]
     where = "z = 0" if cut == "horizontal" else f"vertical plane at φ = {math.degrees(phi0):.0f}°"
-    _draw_cut(ax, field, mmap, lattice, samples, mesh,
+    _draw_cut(ax, field, manifolds, lattice, mesh,
               f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
-    _draw_3d(ax3, lattice, samples, label_of, mesh)
-    shown = mmap.manifolds[:LEGEND_ENTRIES]
+    _draw_3d(ax3, lattice, points, mesh)
+    shown = manifolds[:LEGEND_ENTRIES]
     handles = [plt.Rectangle((0, 0), 1, 1, color=_COLOURS[m.label % 10], alpha=0.6) for m in shown]
     names = [f"{m.name}: {m.pose_count} poses, {m.volume_cm3:.0f} cm³, mean μs {m.mu_s_mean:.2f}"
              for m in shown]
-    if len(mmap.manifolds) > len(shown):
-        rest = mmap.manifolds[len(shown):]
+    if len(manifolds) > len(shown):
+        rest = manifolds[len(shown):]
         handles.append(plt.Rectangle((0, 0), 1, 1, color="white"))
         names.append(f"+{len(rest)} smaller ({sum(m.volume_cm3 for m in rest):.0f} cm³)")
     if handles:

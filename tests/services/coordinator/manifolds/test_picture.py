@@ -1,0 +1,114 @@
+"""Map pictures read the stored poses as arrays (maps.points) with the stored manifold labels:
+the same points and labels the in-memory map has, lattice indices as `Lattice.point` finds
+them, the 3D view thinned only for large maps, and the bytes kept per map version."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+from graspscape.services.coordinator.errors import InvalidInput
+from graspscape.services.coordinator.exploration.lattice import Lattice
+from graspscape.services.coordinator.exploration.samples import point_or_none
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
+from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.manifolds.service import compute_map
+from graspscape.services.coordinator.maps import render
+from graspscape.services.coordinator.maps.picture import picture_bytes
+from graspscape.services.coordinator.maps.points import MapPoints, _lattice_indices, stored_points
+from graspscape.services.coordinator.store.queue import lease_tiles
+from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
+from graspscape.shared.specs.pose import Pose
+
+from tests.factories import oracle_result
+
+
+def explore(sessions, object_id: int) -> int:  # type: ignore[no-untyped-def]
+    """A small adaptive exploration (refinement included) of the oracle, through the ingest."""
+    spec = ExplorationSpec(
+        object_id=object_id,
+        grid={"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02, "dr": 0.01,
+              "attitudes": {"rolls": 2}},
+        refinement={"levels": 1, "local_search_rounds": 0},
+    )
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=40, max_poses=10**6).id
+        while tiles := lease_tiles(s, worker_id="w", n=8, lease_seconds=60):
+            for t in tiles:
+                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                               results=[oracle_result(p) for p in t.poses()])
+    return eid
+
+
+def test_stored_points_are_the_computed_maps_points_and_labels(sessions, named_object) -> None:
+    eid = explore(sessions, named_object("sphere"))
+    with sessions() as s:
+        computed = compute_map(s, eid)
+        got = stored_points(s, eid, computed.lattice)
+        pts = sorted(computed.samples)
+        assert len(pts) > 100 and len(set(computed.label_of.values())) >= 2
+        assert [tuple(int(x) for x in t) for t in zip(
+            got.ring, got.azimuth, got.r_index, got.attitude, strict=True)] == [
+            (p.ring, p.azimuth, p.r_index, p.attitude) for p in pts]
+        assert got.r.tolist() == [computed.samples[p].r for p in pts]
+        assert got.mu_s.tolist() == [computed.samples[p].mu_s for p in pts]
+        assert got.viable.tolist() == [computed.samples[p].viable for p in pts]
+        assert got.label.tolist() == [computed.label_of.get(p, -1) for p in pts]
+        assert np.allclose(got.directions(computed.lattice),
+                           [computed.lattice.direction(p) for p in pts], rtol=0, atol=0)
+
+
+def test_lattice_indices_are_those_of_lattice_point_on_and_off_the_lattice() -> None:
+    lattice = Lattice(PoseGridSpec(dtheta=0.5, r_min=0.0, r_max=0.02, dr=0.01,
+                                   attitudes={"rolls": 4, "tilts": [0.3]}), 2)
+    rng = random.Random(3)
+    on = [lattice.pose(p) for p in lattice.coarse_points()]
+    on += [lattice.pose(lattice.point(Pose(theta=rng.uniform(0, math.pi),
+                                           phi=rng.uniform(0, 2 * math.pi),
+                                           r=rng.choice([0.0025, 0.0075, 0.0125]),
+                                           roll=a[0], pitch=a[1], yaw=a[2])))
+           for a in rng.choices(lattice.attitudes, k=300)]
+    off = [Pose(theta=rng.uniform(0, math.pi), phi=rng.uniform(0, 2 * math.pi),
+                r=rng.uniform(0, 0.02), roll=rng.uniform(0, 6), pitch=0.0, yaw=0.0)
+           for _ in range(300)]
+    off += [p.model_copy(update={"phi": p.phi + 2e-6}) for p in on[:50] if 0 < p.theta < 3]
+    poses = on + off
+    cols = np.array([(p.theta, p.phi, p.r, p.roll, p.pitch, p.yaw) for p in poses])
+    K, J, I, att, found = _lattice_indices(lattice, cols)  # noqa: E741
+    for i, pose in enumerate(poses):
+        p = point_or_none(lattice, pose)
+        assert bool(found[i]) == (p is not None), pose
+        if p is not None:
+            assert (K[i], J[i], I[i], att[i]) == (p.ring, p.azimuth, p.r_index, p.attitude)
+    assert found[: len(on)].all() and not found[len(on):].any()
+
+
+def test_the_3d_view_is_thinned_only_beyond_its_marker_budget() -> None:
+    n = 3 * render.SCATTER_MAX
+    ring = np.arange(n) // 8
+    small = MapPoints(ring[:100], ring[:100] * 0, ring[:100] * 0, ring[:100] * 0,
+                      np.zeros(100), np.zeros(100), np.ones(100, dtype=bool), ring[:100] % 3)
+    assert render._scattered(small) is small
+    big = MapPoints(ring, np.arange(n) % 8 // 2, ring * 0, np.arange(n) % 2, np.zeros(n),
+                    np.zeros(n), np.ones(n, dtype=bool), ring % 3)
+    thinned = render._scattered(big)
+    assert render.SCATTER_MAX // 2 <= len(thinned) <= render.SCATTER_MAX
+    # Sorted as before, one marker per position and label.
+    assert np.all(np.diff(thinned.ring) >= 0)
+    assert len({(a, b, c) for a, b, c in zip(thinned.ring, thinned.azimuth, thinned.label,
+                                             strict=True)}) == len(thinned)
+
+
+@pytest.mark.parametrize("db_url", ["sqlite"], indirect=True)
+def test_a_picture_is_kept_per_map_version_and_checks_its_attitude(sessions,
+                                                                   named_object) -> None:
+    eid = explore(sessions, named_object("sphere"))
+    with sessions() as s:
+        first, manifolds, poses = picture_bytes(s, eid, "png")
+        assert first.startswith(b"\x89PNG") and manifolds >= 2 and poses > 100
+        assert picture_bytes(s, eid, "png")[0] is first  # kept
+        assert picture_bytes(s, eid, "png", attitude=1)[0] != first
+        with pytest.raises(InvalidInput):
+            picture_bytes(s, eid, "png", attitude=2)
