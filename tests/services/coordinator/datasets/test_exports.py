@@ -32,10 +32,13 @@ ATTITUDES = {"rolls": 2, "tilts": [0.3]}
 
 def _turned(results: list[PoseResult], rng: random.Random) -> list[PoseResult]:
     """The factory's grasps all face one way; turn each by a random rotation, so that the
-    quaternion → matrix check means something."""
+    quaternion → matrix check means something. Half the poses without a grasp backed off
+    4 mm from interpenetration (their stored effective_r)."""
     out = []
     for r in results:
-        if r.grasp is not None:
+        if r.grasp is None and rng.random() < 0.5:
+            r = r.model_copy(update={"effective_r": r.pose.r + 0.004})
+        elif r.grasp is not None:
             q = np.array([rng.gauss(0, 1) for _ in range(4)])
             q /= np.linalg.norm(q)
             r = r.model_copy(update={"grasp": r.grasp.model_copy(
