@@ -110,7 +110,7 @@ def _chunk(rows: Any, starts: StartPoses | None) -> Chunk:
     poses = np.array([row[1:7] for row in rows], dtype=float).reshape(n, 6)
     from_grasp = np.array([row.grasp is not None for row in rows], dtype=bool)
     transforms = np.zeros((n, 4, 4))
-    transforms[from_grasp] = grasp_transforms([row.grasp for row in rows if row.grasp])
+    transforms[from_grasp] = grasp_transforms([row.grasp for row in rows if row.grasp is not None])
     for i in np.flatnonzero(~from_grasp):
         if starts is None:
             raise Conflict(f"pose {rows[i].pose_key} formed no grasp, so its transform is its "
