@@ -2,7 +2,8 @@
 
 Builds each exploration through the real ingest path (`lease_tiles` + `ingest_results`, the
 grid strategy on a real lattice, results from `tests.factories.oracle_result`: two grasp types
-split at φ = π, a non-viable cap and side), on SQLite. The manifold table is then stored
+split at φ = π, a non-viable cap and side), on SQLite (and PostgreSQL, `--pg-sizes`, in a
+schema of its own). The manifold table is then stored
 directly (viable poses with φ < π are manifold A, the others B: the oracle's own split) —
 grouping a million poses is issue 21's incremental-manifold work, not a read. Each measurement
 runs in a fresh subprocess, so its peak RSS (`ru_maxrss`) is its own: `map.png` as the route
@@ -10,7 +11,7 @@ makes it (`maps.picture.picture_bytes`), CSV and Parquet as the routes stream th
 (`manifolds.export.pose_pieces`, the pieces counted and dropped). Writes
 benchmarks/results/reads.json.
 
-    .venv/bin/python benchmarks/bench_reads.py [--sizes 100k,1m] [--keep DIR]
+    .venv/bin/python benchmarks/bench_reads.py [--sizes 100k,1m] [--pg-sizes 100k] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -23,7 +24,10 @@ import subprocess
 import sys
 import tempfile
 import time
+import uuid
 from pathlib import Path
+
+import psycopg
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
@@ -34,6 +38,7 @@ from benchmarks._results import write_results  # noqa: E402
 SIZES = {"100k": 0.056, "1m": 0.017}
 TILE_POSES = 2000
 MEASUREMENTS = ("map_png", "csv", "parquet")
+PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 
 
 def _rss_mb() -> float:
@@ -146,7 +151,10 @@ def measure(url: str, eid: int, what: str) -> dict[str, float]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", default="100k,1m")
-    parser.add_argument("--keep", type=Path, default=None, help="keep the databases here")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="keep the SQLite databases here (and reuse them)")
+    parser.add_argument("--pg-sizes", default="100k", help="the same on PostgreSQL")
+    parser.add_argument("--pg-url", default=PG_URL)
     parser.add_argument("--measure", nargs=3, metavar=("URL", "ID", "WHAT"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -167,22 +175,39 @@ def main() -> int:
             else:
                 eid, poses, seconds = build(url, SIZES[size])
                 print(f"{size}: {poses} poses ingested in {seconds:.0f} s")
-            figures[f"poses_{size}"] = poses
-            for what in MEASUREMENTS:
-                done = subprocess.run(
-                    [sys.executable, __file__, "--measure", url, str(eid), what],
-                    check=True, capture_output=True, text=True, cwd=REPO)
-                m = json.loads(done.stdout.strip().splitlines()[-1])
-                print(f"{size} {what}: {m}")
-                figures[f"{what}_s_{size}"] = round(m["seconds"], 2)
-                figures[f"{what}_cpu_s_{size}"] = round(m["cpu_s"], 2)
-                figures[f"{what}_peak_rss_mb_{size}"] = round(m["peak_rss_mb"])
-                if what != "map_png":
-                    figures[f"{what}_rows_per_s_{size}"] = round(poses / m["seconds"])
-                    figures[f"{what}_rows_per_cpu_s_{size}"] = round(poses / m["cpu_s"])
-                    figures[f"{what}_mb_{size}"] = round(m["bytes"] / 2**20, 1)
-    write_results("reads", figures, extra={"sqlite_only": True})
+            measure_all(url, eid, poses, size, figures)
+    for size in filter(None, args.pg_sizes.split(",")):
+        schema = f"bench_reads_{uuid.uuid4().hex[:8]}"
+        conninfo = args.pg_url.replace("postgresql+psycopg://", "postgresql://")
+        with psycopg.connect(conninfo, autocommit=True) as conn:
+            conn.execute(f'CREATE SCHEMA "{schema}"')
+        try:
+            url = f"{args.pg_url}?options=-csearch_path%3D{schema}"
+            eid, poses, seconds = build(url, SIZES[size])
+            print(f"{size} postgresql: {poses} poses ingested in {seconds:.0f} s")
+            measure_all(url, eid, poses, f"{size}_pg", figures)
+        finally:
+            with psycopg.connect(conninfo, autocommit=True) as conn:
+                conn.execute(f'DROP SCHEMA "{schema}" CASCADE')
+    write_results("reads", figures)
     return 0
+
+
+def measure_all(url: str, eid: int, poses: int, tag: str, figures: dict[str, float]) -> None:
+    """Every measurement of one exploration, each in a fresh process, into `figures`."""
+    figures[f"poses_{tag}"] = poses
+    for what in MEASUREMENTS:
+        done = subprocess.run([sys.executable, __file__, "--measure", url, str(eid), what],
+                              check=True, capture_output=True, text=True, cwd=REPO)
+        m = json.loads(done.stdout.strip().splitlines()[-1])
+        print(f"{tag} {what}: {m}")
+        figures[f"{what}_s_{tag}"] = round(m["seconds"], 2)
+        figures[f"{what}_cpu_s_{tag}"] = round(m["cpu_s"], 2)
+        figures[f"{what}_peak_rss_mb_{tag}"] = round(m["peak_rss_mb"])
+        if what != "map_png":
+            figures[f"{what}_rows_per_s_{tag}"] = round(poses / m["seconds"])
+            figures[f"{what}_rows_per_cpu_s_{tag}"] = round(poses / m["cpu_s"])
+            figures[f"{what}_mb_{tag}"] = round(m["bytes"] / 2**20, 1)
 
 
 def _poses(url: str) -> int:
