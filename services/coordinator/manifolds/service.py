@@ -166,12 +166,6 @@ def ensure_manifolds(session: Session, exploration_id: int) -> ComputedMap | Non
     return computed
 
 
-def current_map(session: Session, exploration_id: int) -> ComputedMap:
-    """The map of the stored poses, with the stored manifolds brought up to date: computed
-    once (by the refresh when one was due)."""
-    return ensure_manifolds(session, exploration_id) or compute_map(session, exploration_id)
-
-
 def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
                   lattice: Lattice) -> None:
     """Incremental refresh as tiles finish: first at the REFRESH_EVERY_TILES-th finished
