@@ -161,6 +161,7 @@ def test_chunks_do_not_change_the_exports(client: TestClient, explored: int,
     assert client.get(f"/explorations/{explored}/export/graspgen.json").content == whole
 
 
+@pytest.mark.slow  # the command end to end, three formats, both databases
 def test_cli_writes_what_the_route_serves(client: TestClient, explored: int, db_url: str,
                                           tmp_path: Any) -> None:
     for what in ("graspgen.json", "acronym.h5", "object.obj"):

@@ -65,6 +65,7 @@ def test_account_of_nothing_and_of_misses_only() -> None:
 GRID = {"dtheta": math.radians(60), "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
 
 
+@pytest.mark.slow  # four whole explorations on both databases
 @pytest.mark.parametrize("strategy", [
     {"name": "adaptive"},
     {"name": "grid"},

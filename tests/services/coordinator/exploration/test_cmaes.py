@@ -81,6 +81,7 @@ def test_cmaes_is_seeded_repeatable_in_range_and_within_budget(sessions, named_o
     assert set(other).isdisjoint(stored)
 
 
+@pytest.mark.slow  # a whole search to its budget, on both databases
 def test_cmaes_reaches_the_oracles_best_held_mu_s(sessions, named_object) -> None:
     spec = _spec(named_object("sphere"), poses=300, seed=0, objective="mu_s")
     eid, _, _ = _explore(sessions, spec)
