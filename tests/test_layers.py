@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -45,6 +47,7 @@ def _under(loaded: set[str], package: str) -> list[str]:
     return sorted(m for m in loaded if m == package or m.startswith(package + "."))
 
 
+@pytest.mark.slow  # imports every module in a subprocess
 def test_services_import_the_workers_only_from_the_composing_package() -> None:
     modules = _modules("services", skip="graspscape.services.local")
     assert "graspscape.services.coordinator.app" in modules
@@ -52,6 +55,7 @@ def test_services_import_the_workers_only_from_the_composing_package() -> None:
     assert _under(loaded, "graspscape.workers") == []
 
 
+@pytest.mark.slow  # a subprocess
 def test_shared_imports_neither_side() -> None:
     loaded = _loaded_after_importing(_modules("shared"))
     assert _under(loaded, "graspscape.workers") == []

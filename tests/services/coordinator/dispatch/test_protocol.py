@@ -311,6 +311,7 @@ def test_out_of_range_integers_are_malformed_not_a_store_failure(
         assert set(session.scalars(select(TileRow.state))) == {"queued"}
 
 
+@pytest.mark.slow  # waits past query timeouts on purpose
 def test_a_timed_out_batch_is_sent_again_until_acknowledged_stored_and_evaluated_once(
     dispatcher: Dispatcher, any_sessions: sessionmaker[Session], registry: CollectorRegistry,
     caplog: pytest.LogCaptureFixture,

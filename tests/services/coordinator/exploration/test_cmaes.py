@@ -57,6 +57,7 @@ def _rows(sessions, eid: int) -> list[PoseRow]:
         return list(s.scalars(select(PoseRow).where(PoseRow.exploration_id == eid)))
 
 
+@pytest.mark.slow  # three whole searches per database
 def test_cmaes_is_seeded_repeatable_in_range_and_within_budget(sessions, named_object) -> None:
     object_id = named_object("sphere")
     spec = _spec(object_id, poses=100, seed=5, popsize=8)

@@ -100,6 +100,7 @@ def test_random_is_seeded_in_range_and_within_its_budget(sessions, named_object,
     assert {p.key() for p in random_poses(spec, other)}.isdisjoint(stored)
 
 
+@pytest.mark.slow  # two whole adaptive explorations per database
 def test_adaptive_is_the_default_and_old_specs_parse_as_adaptive(sessions, named_object) -> None:
     object_id = named_object("sphere")
     spec = _spec(object_id, levels=1, grid=SMALL_GRID)
