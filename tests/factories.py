@@ -8,7 +8,7 @@ import random
 
 import trimesh
 from graspscape.services.coordinator.exploration.service import create_exploration
-from graspscape.services.coordinator.store.models import ObjectRow
+from graspscape.services.coordinator.store.models import ObjectRow, PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
@@ -19,7 +19,8 @@ from graspscape.shared.specs.results import (
     PhaseTimes,
     PoseResult,
 )
-from sqlalchemy.orm import Session
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
 
 # What a simulation can end in (an `error` pose is a worker fault, made where a test wants it).
 _SIMULATED = [o for o in Outcome if o != Outcome.ERROR]
@@ -111,3 +112,24 @@ def make_exploration(session: Session, *, dtheta: float = 0.6, target: int = 20)
         object_id=obj.id, gripper="robotiq_3f", grid=PoseGridSpec(dtheta=dtheta, r_max=0.02)
     )
     return create_exploration(session, spec=spec, tile_target_poses=target, max_poses=10**6).id
+
+
+def explore_with_oracle(sessions: sessionmaker[Session], spec: ExplorationSpec, *,
+                        workers: int = 2, seed: int = 1) -> tuple[int, list[str], list[str]]:
+    """Run an exploration to its end in this process with `oracle_result` as the evaluator:
+    (id, pose keys evaluated in order, stored pose keys sorted)."""
+    from graspscape.services.local.run import run_local
+
+    evaluated: list[str] = []
+
+    def evaluate(poses, match=None):  # type: ignore[no-untyped-def]
+        evaluated.extend(p.key() for p in poses)
+        return [oracle_result(p) for p in poses]
+
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=20, max_poses=10**6).id
+    run_local(sessions, evaluate, workers=workers, seed=seed, split=2)
+    with sessions() as s:
+        stored = sorted(s.scalars(select(PoseRow.pose_key)
+                                  .where(PoseRow.exploration_id == eid)))
+    return eid, evaluated, stored

@@ -8,19 +8,17 @@ import math
 
 import numpy as np
 import pytest
-from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.exploration.strategies.cmaes import (
     decode,
     fold,
     generation,
 )
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
-from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
 from sqlalchemy import select
 
-from tests.factories import oracle_result
+from tests.factories import explore_with_oracle, oracle_result
 
 GRID = {"dtheta": math.radians(45), "r_min": 0.005, "r_max": 0.02, "dr": 0.005,
         "attitudes": {"rolls": 4}}
@@ -36,20 +34,7 @@ def _spec(object_id: int, **strategy) -> ExplorationSpec:
 
 def _explore(sessions, spec: ExplorationSpec, workers: int = 2, seed: int = 1
              ) -> tuple[int, list[str], list[str]]:
-    """Run to the end: (id, pose keys evaluated, stored keys)."""
-    evaluated: list[str] = []
-
-    def evaluate(poses, match=None):
-        evaluated.extend(p.key() for p in poses)
-        return [oracle_result(p) for p in poses]
-
-    with sessions() as s:
-        eid = create_exploration(s, spec=spec, tile_target_poses=20, max_poses=10**6).id
-    run_local(sessions, evaluate, workers=workers, seed=seed, split=2)
-    with sessions() as s:
-        stored = sorted(s.scalars(select(PoseRow.pose_key)
-                                  .where(PoseRow.exploration_id == eid)))
-    return eid, evaluated, stored
+    return explore_with_oracle(sessions, spec, workers=workers, seed=seed)
 
 
 def _rows(sessions, eid: int) -> list[PoseRow]:

@@ -9,19 +9,16 @@ import math
 
 import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.exploration.strategies.random import random_poses
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
     PosePlanRow,
-    PoseRow,
     TileRow,
 )
-from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
 from sqlalchemy import func, select
 
-from tests.factories import oracle_result
+from tests.factories import explore_with_oracle
 
 GRID = {"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02, "dr": 0.01,
         "attitudes": {"rolls": 2}}
@@ -38,20 +35,7 @@ def _spec(object_id: int, strategy: dict | None = None, levels: int = 1,
 
 
 def _explore(sessions, spec: ExplorationSpec) -> tuple[int, list[str], list[str]]:
-    """Run an exploration to its end; (id, pose keys evaluated in order, stored keys)."""
-    evaluated: list[str] = []
-
-    def evaluate(poses, match=None):
-        evaluated.extend(p.key() for p in poses)
-        return [oracle_result(p) for p in poses]
-
-    with sessions() as s:
-        eid = create_exploration(s, spec=spec, tile_target_poses=20, max_poses=10**6).id
-    run_local(sessions, evaluate, workers=2, seed=1, split=2)
-    with sessions() as s:
-        stored = sorted(s.scalars(select(PoseRow.pose_key)
-                                  .where(PoseRow.exploration_id == eid)))
-    return eid, evaluated, stored
+    return explore_with_oracle(sessions, spec)
 
 
 def test_grid_stores_exactly_the_dense_grid(sessions, named_object) -> None:
