@@ -27,14 +27,23 @@ class PhysicsSettings(BaseModel):
 
 
 class PlacementSettings(BaseModel):
-    """What happens when the open hand at its start pose would interpenetrate the object."""
+    """What r means, and what happens when the open hand at its start pose would
+    interpenetrate the object.
+
+    `start_gap = "palm"`: r is the palm's gap; a hand that would interpenetrate is backed off
+    along the surface normal in `backoff_step_m` steps (so many r levels start at one place).
+    `"clearance"`: r is the clearance between the whole open hand and the object; the palm gap
+    that gives it is found along the same normal by the same steps, then by bisection to
+    `clearance_tolerance_m` (docs/simulation.md, "Start gap")."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
+    start_gap: Literal["palm", "clearance"] = "palm"
     on_interpenetration: Literal["back_off", "infeasible"] = "back_off"
     backoff_step_m: float = Field(default=0.005, gt=0.0, le=0.05)
     max_backoff_m: float = Field(default=0.10, ge=0.0, le=0.5)
     penetration_tolerance_m: float = Field(default=0.0005, ge=0.0, le=0.01)
+    clearance_tolerance_m: float = Field(default=0.0001, gt=0.0, le=0.005)
 
 
 class BaselinePolicySettings(BaseModel):

@@ -4,7 +4,8 @@ An Evaluator owns one pybullet client with the object and the gripper loaded onc
 evaluation starts by restoring the state saved right after loading (positions, velocities and
 the contact cache), and sets every motor, constraint and gravity it uses, so a result never
 depends on what the client evaluated before. Phases: placement (with back-off from
-interpenetration), approach (policy), closing (policy), release and trajectory with μs probes.
+interpenetration, or at a clearance: `placement.start_gap`), approach (policy), closing
+(policy), release and trajectory with μs probes.
 `Evaluator.robustness` also keeps the synthesized grasp and runs the margins and grasp tests of
 workers/sim/robustness.py on it.
 """
@@ -21,7 +22,7 @@ import numpy as np
 import pybullet as p
 from graspscape.shared.specs.gripper import GripperSpec, load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
-from graspscape.shared.specs.placement import place_gripper
+from graspscape.shared.specs.placement import Placement, place_gripper
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
     GraspConfiguration,
@@ -56,6 +57,7 @@ from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, r
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.signature import build_signature
+from graspscape.workers.sim.start_gap import first_clear_gap
 from graspscape.workers.sim.trajectory import reference_pose
 from scipy.spatial.transform import Rotation
 
@@ -146,6 +148,8 @@ class Evaluator:
         settings = self.settings.placement
         position = self.scene.offset + placement.position
         gap = placement.gap
+        if settings.start_gap == "clearance":
+            return self._clearance_start(placement, position, pose.r)
         backed = 0.0
         while True:
             self._place(position, placement.rotation)
@@ -157,6 +161,37 @@ class Evaluator:
             backed += settings.backoff_step_m
             gap += settings.backoff_step_m
         return position, placement.rotation, self.scene.offset + placement.nearest_point, gap
+
+    def _clearance_start(self, placement: Placement, position: np.ndarray, clearance: float,
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+        """`_start_pose` where r is the open hand's clearance along its approach axis: the
+        palm gap d₀ at which the hand along the surface normal first clears the object (from
+        the surface out, in `backoff_step_m` steps, then bisected to `clearance_tolerance_m`),
+        plus r. The hand can then travel r toward x_c before it touches, whatever its fingers
+        meet first."""
+        settings = self.settings.placement
+        normal = placement.surface_normal
+
+        def at(gap: float) -> np.ndarray:
+            return position + normal * (gap - placement.gap)
+
+        def clear(gap: float) -> bool:
+            self._place(at(gap), placement.rotation)
+            points = get_closest_points(self.client, self.scene.hand.body,
+                                        self.scene.object_body, 0.0)
+            return all(pt.contact_distance >= 0.0 for pt in points)
+
+        step, tolerance = settings.backoff_step_m, settings.clearance_tolerance_m
+        touching = first_clear_gap(clear, 0.0, step, settings.max_backoff_m, tolerance)
+        # Backing off further almost always stays clear; where it does not (a finger moving
+        # back into a handle), the first clear gap beyond is taken the same way.
+        gap = None if touching is None else first_clear_gap(
+            clear, touching + clearance, step, settings.max_backoff_m, tolerance)
+        if gap is None or (settings.on_interpenetration == "infeasible"
+                           and gap > placement.gap + tolerance):
+            return None
+        self._place(at(gap), placement.rotation)  # the search may have ended elsewhere
+        return (at(gap), placement.rotation, self.scene.offset + placement.nearest_point, gap)
 
     def evaluate(self, pose: Pose, *, picture: Path | None = None,
                  donors: DonorPool | None = None) -> PoseResult:
