@@ -24,6 +24,7 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
     false,
+    text,
 )
 from sqlalchemy.orm import Mapped, mapped_column
 
@@ -153,6 +154,13 @@ class ManifoldRow(Base):
     best_mu_s: Mapped[float | None] = mapped_column(Float)
     # Description, volume, μs statistics, local maxima (services/coordinator/manifolds).
     summary: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    # The robust map (manifolds/robust.py, migration 0010): volume of the robust core, the
+    # member with the best robust quality q_δ, and whether the manifold is large (≥ 1 % of the
+    # viable volume; the rest is dust, shown as one entry of the table).
+    core_volume_cm3: Mapped[float | None] = mapped_column(Float)
+    robust_best_key: Mapped[str | None] = mapped_column(String(128))
+    robust_best_q: Mapped[float | None] = mapped_column(Float)
+    large: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
@@ -182,6 +190,10 @@ class PoseRow(Base):
         Index("ix_poses_exploration_id_viable", "exploration_id", "viable"),
         Index("ix_poses_exploration_id_manifold_id", "exploration_id", "manifold_id"),
         Index("ix_poses_exploration_id_created_at", "exploration_id", "created_at"),
+        # /best's certification evidence: the few poses evaluated for another's certification.
+        Index("ix_poses_exploration_id_certifies", "exploration_id", "certifies",
+              sqlite_where=text("certifies IS NOT NULL"),
+              postgresql_where=text("certifies IS NOT NULL")),
     )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
@@ -222,6 +234,15 @@ class PoseRow(Base):
     force_test_share: Mapped[float | None] = mapped_column(Float)
     tug_force_n: Mapped[float | None] = mapped_column(Float)
     shake_survival_s: Mapped[float | None] = mapped_column(Float)
+    # The robust map (manifolds/robust.py, migration 0010), kept current with the manifolds:
+    # robust success s_δ, robust quality q_δ and the label (robust, fragile, futile,
+    # uncertain); NULL until the manifolds are computed with the pose stored.
+    robust_s: Mapped[float | None] = mapped_column(Float)
+    robust_q: Mapped[float | None] = mapped_column(Float)
+    robust_label: Mapped[str | None] = mapped_column(String(16))
+    # The key of the pose whose certification this evaluation serves (a jittered or extra
+    # evaluation of its neighbourhood); NULL for every other pose.
+    certifies: Mapped[str | None] = mapped_column(String(128))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

@@ -86,9 +86,10 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
                     ("explorations", "id, object_id, spec, status, tiles_total, poses_total, "
                                      "poses_done, viable_count, created_at, updated_at, "
                                      "started_at, finished_at"),
-                    # the columns of 0005 (0009 adds `error`)
+                    # the columns of 0005 (0009 adds `error`, 0010 the robust map's)
                     ("poses", ", ".join(c.name for c in PoseRow.__table__.columns
-                                        if c.name != "error")),
+                                        if c.name not in {"error", "robust_s", "robust_q",
+                                                          "robust_label", "certifies"})),
                     ("objects", "*"),
                     # the columns of 0005 (0007 adds `round`)
                     ("tiles", 'id, exploration_id, level, "index", cells, r_levels, attitudes, '
@@ -194,4 +195,59 @@ def test_0007_stores_the_search_round_explicitly_and_back(empty_url: str) -> Non
     engine = db.make_engine(empty_url)
     with engine.connect() as c:
         assert c.execute(text('SELECT level, "index" FROM tiles ORDER BY id')).all() == levels
+    engine.dispose()
+
+
+def test_0010_adds_the_robust_map_columns_and_back(empty_url: str) -> None:
+    """0010 adds the robust map's columns (NULL, `large` false) to existing poses and
+    manifolds, clears the exploration's refresh mark so that the next read recomputes them,
+    and its downgrade drops them keeping every row. On both backends."""
+    from alembic import command
+    from sqlalchemy import MetaData, insert, text
+
+    db.upgrade(empty_url, "0009")
+    engine = db.make_engine(empty_url)
+    old = MetaData()
+    old.reflect(engine)
+    now = datetime(2026, 12, 1, tzinfo=UTC)
+    with engine.begin() as c:
+        c.execute(insert(old.tables["objects"]).values(
+            id=1, kind="named", name="sphere", properties={}, created_at=now))
+        c.execute(insert(old.tables["explorations"]).values(
+            id=1, object_id=1, spec={"object_id": 1}, status="done", tiles_total=1,
+            poses_total=1, poses_done=1, viable_count=1, created_at=now, updated_at=now,
+            manifolds_poses_done=1, manifolds_final=True))
+        c.execute(insert(old.tables["manifolds"]).values(
+            id=1, exploration_id=1, label=0, size=1, best_pose_key="k", best_mu_s=0.5,
+            created_at=now))
+        c.execute(insert(old.tables["poses"]).values(
+            id=1, exploration_id=1, pose_key="k", theta=1.0, phi=0.0, r=0.0, roll=0.0,
+            pitch=0.0, yaw=0.0, outcome="held", viable=True, mu_s=0.5, effort_max_nm=1.0,
+            manifold_id=1, eval_time_s=0.1, created_at=now))
+    engine.dispose()
+    db.upgrade(empty_url, "0010")
+    engine = db.make_engine(empty_url)
+    with engine.connect() as c:
+        assert c.execute(text(
+            "SELECT pose_key, manifold_id, robust_s, robust_q, robust_label, certifies "
+            "FROM poses")).all() == [("k", 1, None, None, None, None)]
+        assert c.execute(text(
+            "SELECT best_pose_key, core_volume_cm3, robust_best_key, robust_best_q, large "
+            "FROM manifolds")).all() == [("k", None, None, None, False)]
+        assert c.execute(text(
+            "SELECT manifolds_poses_done, manifolds_final FROM explorations")).one() == (
+            None, True)
+        indexes = {i["name"] for i in inspect(c).get_indexes("poses")}
+        assert "ix_poses_exploration_id_certifies" in indexes
+    engine.dispose()
+    command.downgrade(db.alembic_config(empty_url), "0009")
+    engine = db.make_engine(empty_url)
+    with engine.connect() as c:
+        pose_cols = {col["name"] for col in inspect(c).get_columns("poses")}
+        manifold_cols = {col["name"] for col in inspect(c).get_columns("manifolds")}
+        assert not pose_cols & {"robust_s", "robust_q", "robust_label", "certifies"}
+        assert not manifold_cols & {"core_volume_cm3", "robust_best_key", "robust_best_q",
+                                    "large"}
+        assert c.execute(text("SELECT pose_key, manifold_id FROM poses")).all() == [("k", 1)]
+        assert c.execute(text("SELECT count(*) FROM manifolds")).scalar_one() == 1
     engine.dispose()
