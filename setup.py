@@ -7,4 +7,7 @@ ROOTS = ("shared", "workers", "services")
 
 packages = [f"graspscape.{root}" for root in ROOTS]
 packages += [f"graspscape.{root}.{sub}" for root in ROOTS for sub in find_packages(root)]
-setup(packages=packages, package_dir={f"graspscape.{root}": root for root in ROOTS})
+# The viewer's page, script and vendored three.js travel with the package (no CDN, no build).
+package_data = {"graspscape.services.coordinator.web": ["static/*", "static/vendor/*"]}
+setup(packages=packages, package_dir={f"graspscape.{root}": root for root in ROOTS},
+      package_data=package_data)

@@ -18,7 +18,7 @@ from fastapi import FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from graspscape.services.coordinator import db
+from graspscape.services.coordinator import db, web
 from graspscape.services.coordinator.api import (
     budget,
     datasets,
@@ -144,4 +144,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(router)
     app.include_router(manifolds.router)
     app.include_router(datasets.router)
+    web.mount(app)  # the viewer at / (services/coordinator/web)
     return app

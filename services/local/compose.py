@@ -14,6 +14,8 @@ from graspscape.services.coordinator import db
 from graspscape.services.coordinator.objects.geometry import MeshSource, use_mesh_source
 from graspscape.services.coordinator.objects.schemas import ObjectOut
 from graspscape.services.coordinator.objects.service import create_named, create_uploaded
+from graspscape.services.coordinator.web.grasp import use_grasp_painter
+from graspscape.services.local.grasp_picture import painter
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.workers.sim.evaluate import default_cache_dir
 from graspscape.workers.sim.objects import prepare_object
@@ -27,8 +29,10 @@ def prepared_mesh(spec: ObjectSpec) -> Any:
 
 
 def wire() -> None:
-    """Let the coordinator in this process see objects as the workers prepare them."""
+    """Let the coordinator in this process see objects as the workers prepare them and picture
+    grasps as they simulate them."""
     use_mesh_source(MeshSource(prepare=prepared_mesh, cache_dir=default_cache_dir()))
+    use_grasp_painter(painter())
 
 
 def open_store(url: str) -> tuple[Engine, sessionmaker[Session]]:
