@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from graspscape.shared.specs.gripper import GripperSpec
+from graspscape.shared.specs.gripper import AnyGripperSpec, GripperSpec
 from graspscape.shared.specs.pose import Pose
 from scipy.spatial.transform import Rotation
 
@@ -87,7 +87,7 @@ def detect(mesh: Any, *, samples: int = 800, seed: int = 0) -> list[Symmetry]:
     return found
 
 
-def task_symmetries(found: list[Symmetry], gripper: GripperSpec) -> list[Symmetry]:
+def task_symmetries(found: list[Symmetry], gripper: AnyGripperSpec) -> list[Symmetry]:
     """The object's symmetries that the grasping task keeps: z → −z never (gravity and the
     lift act along z, so a grasp from below is not the mirror image of one from above), and
     mirrors only for a gripper that is itself mirror-symmetric."""
@@ -136,8 +136,10 @@ class HandMirror:
         return mirrored, -value if tail == "spread" else value
 
 
-def hand_mirror(gripper: GripperSpec, tol: float = 1e-6) -> HandMirror | None:
+def hand_mirror(gripper: AnyGripperSpec, tol: float = 1e-6) -> HandMirror | None:
     """The pairing of fingers by mount y ↔ −y, or None if the gripper is not symmetric."""
+    if not isinstance(gripper, GripperSpec):
+        return None  # a URDF gripper: its mounts are not in the spec, so no mirror is claimed
     fingers = {}
     for f in gripper.fingers:
         x, y, z = f.mount_xyz
