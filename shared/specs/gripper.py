@@ -1,5 +1,6 @@
-"""The gripper spec format: a palm and fingers made of phalanges, generic enough for any
-serial-finger gripper (the Robotiq 3-finger hand, a parallel-jaw gripper, ...).
+"""The gripper spec formats: a palm and fingers made of phalanges (a TOML of boxes, generic
+enough for any serial-finger gripper: the Robotiq 3-finger hand, a parallel-jaw gripper, ...),
+or a vendor's URDF plus a short description of it (`UrdfGripperSpec`, docs/grippers.md).
 
 Frames: the gripper base frame has its origin at the centre of the palm surface and +z along
 the palm normal, pointing out of the palm toward where the fingers reach. Each finger has a
@@ -9,6 +10,7 @@ the mount frame the finger extends along +z and closes toward +x.
 
 from __future__ import annotations
 
+import re
 import tomllib
 from pathlib import Path
 from typing import Literal
@@ -108,17 +110,148 @@ class GripperSpec(BaseModel):
         return best
 
 
-def load_gripper(name_or_path: str) -> GripperSpec:
-    """A gripper by name (a file in configs/grippers/) or by path to a TOML spec."""
+# A finger's name is the digit its links are counted under (manifolds/behaviour.py reads the
+# digit as the letters before "_1", "_2", ... of a link name), so letters only.
+_FINGER_NAME = re.compile(r"^[A-Za-z]+$")
+URDF_DESCRIPTION = "gripper.toml"  # the description file inside a URDF gripper's folder
+
+
+class MimicSpec(BaseModel):
+    """A joint that follows another one, q = ratio · q_driver + offset (a URDF <mimic>, a
+    coupling linkage): realised with a pybullet gear constraint, not a motor."""
+
+    model_config = ConfigDict(frozen=True)
+
+    joint: str = Field(description="the driving joint, as the URDF names it")
+    ratio: float = 1.0
+    offset: float = 0.0
+
+
+class UrdfJointSpec(BaseModel):
+    """One joint of a finger, in closing order. Values are in the URDF's own convention."""
+
+    model_config = ConfigDict(frozen=True)
+
+    joint: str = Field(description="the joint's name in the URDF")
+    open: float = Field(description="joint value of the open hand (URDF convention)")
+    closing: Literal[1, -1] = Field(
+        default=1, description="+1: the joint closes as its value grows; -1: as it shrinks")
+    torque_share: float = Field(default=1.0, gt=0, le=1.0)
+    mimic: MimicSpec | None = None
+
+
+class UrdfSpreadSpec(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    joint: str
+    sign: float = Field(default=1.0, description="how this finger follows the spread mode")
+
+
+class UrdfFingerSpec(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+    name: str
+    joints: tuple[UrdfJointSpec, ...] = Field(min_length=1)
+    spread: UrdfSpreadSpec | None = None
+
+    @model_validator(mode="after")
+    def _name(self) -> UrdfFingerSpec:
+        if not _FINGER_NAME.match(self.name):
+            raise ValueError(f"finger name {self.name!r}: letters only (it names a digit)")
+        return self
+
+    @property
+    def actuated(self) -> bool:
+        """A finger whose joints all mimic others has no actuator of its own."""
+        return any(j.mimic is None for j in self.joints)
+
+
+class PalmFrameSpec(BaseModel):
+    """The gripper frame in the base link's frame: origin at the palm surface centre, z along
+    the palm normal (toward where the fingers reach), x toward the side that placement's
+    reference attitude turns up (shared/specs/placement.py)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    normal: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    x_axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
+
+
+class UrdfGripperSpec(BaseModel):
+    """A gripper from its URDF plus this description (the folder's gripper.toml)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    kind: Literal["urdf"] = "urdf"
+    name: str
+    description: str = ""
+    source: str = Field(default="", description="where the URDF and meshes come from")
+    licence: str = Field(default="", description="their licence (a file in the folder)")
+    folder: Path = Field(description="the gripper's folder; every file it uses lies inside")
+    urdf: str = Field(description="the URDF file, relative to the folder")
+    base_link: str = Field(description="root of the gripper's subtree; links above are dropped")
+    palm: PalmFrameSpec = PalmFrameSpec()
+    fingers: tuple[UrdfFingerSpec, ...] = Field(min_length=1)
+    closing_effort: float = Field(gt=0, description="N·m or N per finger actuator")
+    spread_modes: dict[str, float] = Field(default_factory=lambda: {"basic": 0.0})
+    reach_m: float = Field(gt=0, description="how far the open hand reaches past the palm "
+                           "surface (`graspscape gripper check` measures it)")
+    inertia: Literal["file", "geometry"] = Field(
+        default="file", description="the URDF's inertia tensors, or pybullet's from the "
+        "collision shapes (for files whose tensors are placeholders)")
+
+    @model_validator(mode="after")
+    def _unique(self) -> UrdfGripperSpec:
+        names = [f.name for f in self.fingers]
+        joints = [j.joint for f in self.fingers for j in f.joints]
+        if len(set(names)) != len(names) or len(set(joints)) != len(joints):
+            raise ValueError("finger names and joint names must be unique")
+        if not any(f.actuated for f in self.fingers):
+            raise ValueError("no finger has an actuated joint")
+        return self
+
+    def reach(self) -> float:
+        return self.reach_m
+
+
+AnyGripperSpec = GripperSpec | UrdfGripperSpec
+
+
+def _urdf_folder(name_or_path: str) -> Path | None:
+    path = Path(name_or_path)
+    if path.is_dir() and (path / URDF_DESCRIPTION).is_file():
+        return path
+    if path.name == URDF_DESCRIPTION and path.is_file():
+        return path.parent
+    named = CONFIG_DIR / name_or_path
+    if not path.suffix and (named / URDF_DESCRIPTION).is_file():
+        return named
+    return None
+
+
+def load_urdf_gripper(folder: Path) -> UrdfGripperSpec:
+    with (folder / URDF_DESCRIPTION).open("rb") as fh:
+        data = tomllib.load(fh)
+    return UrdfGripperSpec.model_validate({**data, "folder": folder.resolve()})
+
+
+def load_gripper(name_or_path: str) -> AnyGripperSpec:
+    """A gripper by name (configs/grippers/NAME.toml, or the folder configs/grippers/NAME/ of a
+    URDF gripper), by path to a TOML spec, or by path to a URDF gripper's folder."""
+    folder = _urdf_folder(name_or_path)
+    if folder is not None:
+        return load_urdf_gripper(folder)
     path = Path(name_or_path)
     if not path.suffix:
         path = CONFIG_DIR / f"{name_or_path}.toml"
     if not path.is_file():
-        known = sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
-        raise ValueError(f"unknown gripper {name_or_path!r}; known: {', '.join(known)}")
+        raise ValueError(f"unknown gripper {name_or_path!r}; known: {', '.join(list_grippers())}")
     with path.open("rb") as fh:
         return GripperSpec.model_validate(tomllib.load(fh))
 
 
 def list_grippers() -> list[str]:
-    return sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
+    boxes = [p.stem for p in CONFIG_DIR.glob("*.toml")]
+    urdfs = [p.parent.name for p in CONFIG_DIR.glob(f"*/{URDF_DESCRIPTION}")]
+    return sorted(boxes + urdfs)

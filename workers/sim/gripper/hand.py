@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pybullet as p
-from graspscape.shared.specs.gripper import GripperSpec
+from graspscape.shared.specs.gripper import AnyGripperSpec
 from graspscape.workers.sim.bullet import (
     get_dynamics_info,
     get_joint_info,
@@ -28,7 +28,12 @@ from graspscape.workers.sim.bullet import (
     matrix_from_quat,
 )
 from graspscape.workers.sim.geometry import quat_from_matrix
-from graspscape.workers.sim.gripper.urdf import write_gripper_urdf
+from graspscape.workers.sim.gripper.model import (
+    add_couplings,
+    hand_model,
+    load_body,
+    reset_couplings,
+)
 
 # The velocity target of a blocked phalanx: beyond what any link reaches within one step, so its
 # motor row saturates at the force cap in the solver's first iteration and the phalanx pushes
@@ -54,12 +59,12 @@ class FingerJoints:
 
 
 class Hand:
-    def __init__(self, client: int, spec: GripperSpec, urdf_dir: Path) -> None:
+    def __init__(self, client: int, spec: AnyGripperSpec, urdf_dir: Path) -> None:
         self.client = client
         self.spec = spec
-        path = write_gripper_urdf(spec, urdf_dir)
-        self.body = p.loadURDF(str(path), basePosition=[0, 0, 5], useFixedBase=False,
-                               flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
+        # A TOML spec of boxes or a vendor's URDF, both in the same conventions (model.py).
+        self.model = hand_model(spec, urdf_dir)
+        self.body = load_body(client, self.model)
         self.link_names: dict[int, str] = {-1: "palm"}
         joint_by_name: dict[str, int] = {}
         infos = [get_joint_info(client, self.body, j)
@@ -71,15 +76,15 @@ class Hand:
         self.movable = [j for j in joint_by_name.values()
                         if infos[j].joint_type != p.JOINT_FIXED]
         self.fingers: list[FingerJoints] = []
-        for finger in spec.fingers:
+        for finger in self.model.fingers:
             self.fingers.append(FingerJoints(
-                name=finger.name,
-                spread_joint=joint_by_name.get(f"{finger.name}_spread_joint"),
+                name=finger.finger,
+                spread_joint=joint_by_name[finger.spread_joint] if finger.spread_joint else None,
                 spread_sign=finger.spread_sign,
-                joints=[joint_by_name[f"{finger.name}_{ph.name}_joint"] for ph in finger.phalanges],
-                open_values=[ph.open for ph in finger.phalanges],
-                uppers=[ph.upper for ph in finger.phalanges],
-                shares=[ph.torque_share for ph in finger.phalanges],
+                joints=[joint_by_name[name] for name in finger.joints],
+                open_values=list(finger.open_values),
+                uppers=list(finger.uppers),
+                shares=list(finger.shares),
             ))
         self.finger_joints = [j for f in self.fingers for j in f.joints]
         self.mass = sum(get_dynamics_info(client, self.body, link).mass
@@ -91,6 +96,8 @@ class Hand:
         # The trap: default velocity motors lock every joint until switched off.
         p.setJointMotorControlArray(self.body, self.movable, p.VELOCITY_CONTROL,
                                     forces=[0.0] * len(self.movable), physicsClientId=client)
+        # Joints that mimic others follow them through gear constraints, motors off.
+        self.couplings = add_couplings(client, self.body, self.model.couplings, joint_by_name)
         self.effort = spec.closing_effort
         self.hold_factor = 3.0
         # The last motor command of each finger and spread joint: (mode, target, force).
@@ -124,6 +131,7 @@ class Hand:
                                         targetPosition=angle, force=10 * effort,
                                         physicsClientId=cid)
                 self.commands[finger.spread_joint] = (p.POSITION_CONTROL, angle, 10 * effort)
+        reset_couplings(cid, self.body, self.couplings)
         self._hold(self.finger_joints, [q for f in self.fingers for q in f.open_values])
 
     def _hold(self, joints: list[int], targets: list[float]) -> None:
