@@ -222,8 +222,39 @@ class CmaesStrategySpec(BaseModel):
         "stored on the pose, else μs; 'mu_s': μs. A non-viable pose scores 0")
 
 
+class PpoStrategySpec(BaseModel):
+    """stable-baselines3's PPO over the continuous pose space (the paper's PPO baseline): one
+    pose per episode, reward w_s·quality − w_f·τ_m (0 when no grasp held); a rollout of
+    `batch` poses per round, trained on once all of it is stored; `poses` evaluations in all,
+    repeatable from `seed`. Needs the optional extra `rl`
+    (services/coordinator/exploration/strategies/ppo.py)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: Literal["ppo"]
+    poses: int = Field(default=1000, ge=1, le=1_000_000, description="evaluation budget")
+    seed: int = Field(default=0, ge=0, le=2**31 - 1)
+    batch: int = Field(default=32, ge=4, le=4096,
+                       description="poses per rollout (one round): PPO's n_steps")
+    epochs: int = Field(default=10, ge=1, le=100, description="PPO epochs per rollout")
+    learning_rate: float = Field(default=3e-3, gt=0.0, le=1.0)
+    ent_coef: float = Field(default=0.0, ge=0.0, le=1.0, description="entropy bonus")
+    log_std_init: float = Field(
+        default=0.0, ge=-5.0, le=2.0,
+        description="initial log standard deviation of the Gaussian policy, in action units "
+        "(0: σ = 1, about the whole pose space)")
+    w_s: float = Field(default=1.0, ge=0.0, le=100.0, description="weight of the quality")
+    w_f: float = Field(default=0.05, ge=0.0, le=100.0,
+                       description="weight of the largest joint effort τ_m, 1/Nm")
+    objective: Literal["rank", "mu_s"] = Field(
+        default="rank",
+        description="the quality: 'rank', the torque margin ratio where stored on the pose, "
+        "else μs; 'mu_s': μs")
+
+
 StrategySpec = Annotated[
-    AdaptiveStrategySpec | GridStrategySpec | RandomStrategySpec | CmaesStrategySpec,
+    AdaptiveStrategySpec | GridStrategySpec | RandomStrategySpec | CmaesStrategySpec
+    | PpoStrategySpec,
     Field(discriminator="name"),
 ]
 
@@ -261,8 +292,9 @@ class ExplorationSpec(BaseModel):
         default_factory=AdaptiveStrategySpec,
         description="how the pose space is explored, by name: 'adaptive' (the default: coarse "
         "grid, refinement, shortcuts, local search), 'grid' (the dense grid at the finest "
-        "level), 'random' (a seeded uniform sample of `poses` poses) or 'cmaes' (CMA-ES with "
-        "restarts, `poses` evaluations)",
+        "level), 'random' (a seeded uniform sample of `poses` poses), 'cmaes' (CMA-ES with "
+        "restarts, `poses` evaluations) or 'ppo' (PPO, `poses` evaluations; optional extra "
+        "`rl`)",
     )
 
     @field_validator("gripper")

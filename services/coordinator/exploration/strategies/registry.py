@@ -6,6 +6,7 @@ from graspscape.services.coordinator.exploration.strategies.adaptive import Adap
 from graspscape.services.coordinator.exploration.strategies.base import Strategy
 from graspscape.services.coordinator.exploration.strategies.cmaes import CmaesStrategy
 from graspscape.services.coordinator.exploration.strategies.grid import GridStrategy
+from graspscape.services.coordinator.exploration.strategies.ppo import PpoStrategy
 from graspscape.services.coordinator.exploration.strategies.random import RandomStrategy
 from graspscape.shared.specs.exploration import ExplorationSpec
 
@@ -14,6 +15,7 @@ _BY_NAME: dict[str, type] = {
     "grid": GridStrategy,
     "random": RandomStrategy,
     "cmaes": CmaesStrategy,
+    "ppo": PpoStrategy,  # needs the optional extra `rl`: refused at submission without it
 }
 
 
