@@ -88,6 +88,7 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
 def build_parser() -> argparse.ArgumentParser:
     from graspscape.services.coordinator import cli as coordinator_cli
     from graspscape.services.coordinator.maps import cli as maps_cli
+    from graspscape.services.local.gripper_cli import register as register_gripper
     from graspscape.services.local.map_run import register_run
     from graspscape.workers import cli as workers_cli
 
@@ -100,6 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     coordinator_cli.register(subparsers)
     _register_explore(subparsers)
     register_run(maps_cli.register(subparsers))
+    register_gripper(subparsers)
     return parser
 
 
