@@ -19,6 +19,7 @@ from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds import export
 from graspscape.services.coordinator.manifolds import service as manifolds
+from graspscape.services.coordinator.manifolds.robust import coarser_for_error, error_in_steps
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary, table_rows_of
 from pydantic import BaseModel, Field
 
@@ -41,10 +42,44 @@ class ManifoldTable(ManifoldList):
                                         "table): label, description, poses, μs, best key")
 
 
+class CertificationEvidence(BaseModel):
+    """What backs a pose's robust score (manifolds.service.Evidence)."""
+
+    neighbours: int = Field(description="members of N_δ(p) on the lattice")
+    neighbours_known: int = Field(description="of them stored (evaluated or shortcut-inferred)")
+    neighbours_evaluated: int = Field(description="of them simulated by a worker")
+    neighbours_held: int = Field(description="of them held with the pose's grasp type")
+    certifying: int = Field(description="poses evaluated for this pose's certification "
+                            "(their `certifies` is its key)")
+    certifying_held: int = Field(description="of them held")
+
+
+class BestPose(PoseOut):
+    """A stored pose with its robust score at the δ of the request."""
+
+    robust_s: float | None = Field(default=None, description="robust success s_δ: share of "
+                                   "N_δ ∪ {p} held with the pose's grasp type (known members)")
+    robust_s_low: float | None = Field(default=None, description="s_δ with unknown members "
+                                       "counted as failures")
+    robust_s_high: float | None = Field(default=None, description="… as successes")
+    robust_q: float | None = Field(default=None, description="robust quality q_δ: mean μs over "
+                                   "N_δ ∪ {p}, 0 for drops and other grasp types")
+    robust_label: str | None = Field(default=None, description="robust (s ≥ 0.9), fragile, "
+                                     "futile (s ≤ 0.1), or uncertain where the unknown members "
+                                     "could change the label; null off the lattice")
+    evidence: CertificationEvidence
+
+
 class BestOut(BaseModel):
     exploration_id: int
     manifold: str | None
-    poses: list[PoseOut]
+    rank: str = Field(description="what ranked the poses")
+    delta_steps: int = Field(description="δ in finest lattice steps: 1, or 2 where the stated "
+                             "pose error exceeds one step")
+    delta_deg: float = Field(description="δ as an angle between approach directions, °")
+    delta_mm: float = Field(description="δ along r, mm")
+    error_within_delta: bool = Field(description="the stated pose error is within δ")
+    poses: list[BestPose]
 
 
 def _label_number(label: str) -> int:
@@ -98,9 +133,20 @@ def best(
     max_effort_nm: Annotated[float | None, Query(ge=0.0, le=1e6, allow_inf_nan=False)] = None,
     limit: Annotated[int, Query(ge=1, le=100)] = 1,
     rank: Annotated[manifolds.Rank, Query(
-        description="rank by μs, a static metric (mu_g, mu_f, mu_m) or a robustness margin or "
-        "test; highest first, except torque_margin_nm and friction_margin (lowest first); "
-        "poses without the value come last, ties by μs")] = manifolds.DEFAULT_RANK,
+        description="robust (default): by the robust map over the pose-error neighbourhood "
+        "N_δ — robust poses first, then uncertain, fragile, futile, each by robust quality "
+        "q_δ; point: by the pose's own torque_margin_ratio; or by μs, a static metric (mu_g, "
+        "mu_f, mu_m) or a robustness margin or test; highest first, except torque_margin_nm "
+        "and friction_margin (lowest first); poses without the value come last, ties by μs"
+    )] = manifolds.BEST_DEFAULT_RANK,
+    pose_error_mm: Annotated[float | None, Query(
+        ge=0.0, le=1e4, allow_inf_nan=False,
+        description="the robot's position error, mm: beyond one finest r step, δ is two "
+        "steps")] = None,
+    pose_error_deg: Annotated[float | None, Query(
+        ge=0.0, le=180.0, allow_inf_nan=False,
+        description="the robot's angular error, °: beyond one finest angular step, δ is two "
+        "steps")] = None,
 ) -> Any:
     axis_given = [c is not None for c in (cone_x, cone_y, cone_z)]
     axis = None
@@ -114,16 +160,42 @@ def best(
     elif cone_half_angle_deg is not None:
         raise InvalidInput("cone_half_angle_deg needs cone_x, cone_y, cone_z", loc=("query",))
     manifolds.ensure_manifolds(session, exploration_id)
+    lattice = manifolds.lattice_of_exploration(session, exploration_id)
+    coarser = coarser_for_error(lattice, pose_error_mm, pose_error_deg)
     rows = manifolds.best_poses(
         session, exploration_id,
         label=_label_number(manifold) if manifold is not None else None,
         cone_axis=axis,
         cone_half_angle=math.radians(cone_half_angle_deg) if cone_half_angle_deg is not None
         else None,
-        max_effort_nm=max_effort_nm, limit=limit, rank=rank,
+        max_effort_nm=max_effort_nm, limit=limit, rank=rank, coarser=coarser,
     )
-    return BestOut(exploration_id=exploration_id, manifold=manifold,
-                   poses=rows)
+    evidence = manifolds.robust_evidence(session, exploration_id, rows, coarser=coarser)
+    poses = []
+    for row, ev in zip(rows, evidence, strict=True):
+        sc = ev.score
+        poses.append(BestPose(
+            **PoseOut.model_validate(row).model_dump(),
+            robust_s=sc.s if sc else None, robust_s_low=sc.s_low if sc else None,
+            robust_s_high=sc.s_high if sc else None, robust_q=sc.q if sc else None,
+            robust_label=sc.label.value if sc else None,
+            evidence=CertificationEvidence(
+                neighbours=ev.neighbours, neighbours_known=ev.neighbours_known,
+                neighbours_evaluated=ev.neighbours_evaluated,
+                neighbours_held=ev.neighbours_held, certifying=ev.certifying,
+                certifying_held=ev.certifying_held),
+        ))
+    steps = 1 << coarser
+    return BestOut(
+        exploration_id=exploration_id, manifold=manifold,
+        rank=(manifolds.DEFAULT_RANK if rank == manifolds.Rank.POINT else rank).value,
+        delta_steps=steps,
+        delta_deg=math.degrees(lattice.dtheta(lattice.depth)) * steps,
+        delta_mm=lattice.dr(lattice.depth) * 1000.0 * steps,
+        error_within_delta=error_in_steps(lattice, pose_error_mm, pose_error_deg)
+        <= steps + 1e-9,
+        poses=poses,
+    )
 
 
 def _picture(exploration_id: int, session: Any, fmt: Literal["png", "svg"], cut: str,

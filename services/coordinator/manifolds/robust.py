@@ -37,6 +37,7 @@ This module scores every pose by what happens around it, on the lattice itself:
 
 from __future__ import annotations
 
+import math
 from collections import Counter, deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -210,6 +211,30 @@ def robust_core(
     hood = Neighbourhoods(lattice, coarser)
     inside = set(members)
     return {p for p in inside if all(q in inside and q in samples for q in hood(p))}
+
+
+def coarser_for_error(lattice: Lattice, pose_error_mm: float | None,
+                      pose_error_deg: float | None) -> int:
+    """Which δ a stated pose error asks for: the finest step (0) when the error is within one
+    finest step on both counts — the position error against the finest r step, the angular
+    error against the finest angular step between approach directions — else one coarser
+    step (1). Never more: beyond 2δ the neighbourhood is still that of 2δ (the caller says
+    so with `error_within`)."""
+    ratio = error_in_steps(lattice, pose_error_mm, pose_error_deg)
+    return 0 if ratio <= 1.0 + 1e-9 else 1
+
+
+def error_in_steps(lattice: Lattice, pose_error_mm: float | None,
+                   pose_error_deg: float | None) -> float:
+    """The larger of the two errors in finest steps (0 where neither is stated)."""
+    step_mm = lattice.dr(lattice.depth) * 1000.0
+    step_deg = math.degrees(lattice.dtheta(lattice.depth))
+    ratios = [0.0]
+    if pose_error_mm is not None and step_mm > 0:
+        ratios.append(pose_error_mm / step_mm)
+    if pose_error_deg is not None:
+        ratios.append(pose_error_deg / step_deg)
+    return max(ratios)
 
 
 def large_manifolds(

@@ -27,10 +27,19 @@ from graspscape.services.coordinator.manifolds.grouping import (
     FineLabels,
     surface_radii,
 )
+from graspscape.services.coordinator.manifolds.robust import (
+    Neighbourhoods,
+    RobustLabel,
+    RobustScore,
+    robust_scores,
+    score,
+)
 from graspscape.services.coordinator.manifolds.summary import (
+    LABEL_ORDER,
     ManifoldMap,
     ManifoldSummary,
     build_map,
+    robust_order,
 )
 from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import (
@@ -40,7 +49,7 @@ from graspscape.services.coordinator.store.models import (
     PoseRow,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
-from sqlalchemy import bindparam, delete, select, update
+from sqlalchemy import bindparam, case, delete, select, update
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
@@ -129,7 +138,9 @@ def refresh_manifolds(
         ManifoldRow(
             exploration_id=exploration_id, label=m.label, signature=signature_of.get(m.best.key),
             size=m.pose_count, best_pose_key=m.best.key, best_mu_s=m.best.mu_s,
-            summary=m.model_dump(mode="json"),
+            summary=m.model_dump(mode="json"), core_volume_cm3=m.core_volume_cm3,
+            robust_best_key=m.robust_best.key if m.robust_best else None,
+            robust_best_q=m.robust_best.q if m.robust_best else None, large=m.large,
         )
         for m in mmap.manifolds
     ]
@@ -146,7 +157,36 @@ def refresh_manifolds(
             .values(manifold_id=bindparam("m")),
             assignments,
         )
+    store_robust_scores(session, exploration_id, mmap.robust)
     return computed
+
+
+def store_robust_scores(session: Session, exploration_id: int,
+                        scores: dict[str, RobustScore]) -> int:
+    """Write each pose's robust score (robust_s, robust_q, robust_label) where it changed
+    since the last refresh: between refreshes only the poses near new ones change, and reading
+    the stored scores costs far less than rewriting every row. Returns the rows written."""
+    stored = {
+        key: (s, q, label) for key, s, q, label in session.execute(
+            select(PoseRow.pose_key, PoseRow.robust_s, PoseRow.robust_q, PoseRow.robust_label)
+            .where(PoseRow.exploration_id == exploration_id)
+            .execution_options(yield_per=5000))
+    }
+    changed = []
+    for key, sc in scores.items():
+        new = (sc.s, sc.q, sc.label.value)
+        if stored.get(key) != new:
+            changed.append({"k": key, "s": new[0], "q": new[1], "l": new[2]})
+    if changed:
+        poses = PoseRow.__table__
+        session.connection().execute(
+            poses.update()
+            .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
+            .values(robust_s=bindparam("s"), robust_q=bindparam("q"),
+                    robust_label=bindparam("l")),
+            changed,
+        )
+    return len(changed)
 
 
 def ensure_manifolds(session: Session, exploration_id: int) -> ComputedMap | None:
@@ -227,6 +267,11 @@ class Rank(StrEnum):
     FORCE_TEST_SHARE = "force_test_share"
     TUG_FORCE_N = "tug_force_n"
     SHAKE_SURVIVAL_S = "shake_survival_s"
+    # The robust ranking (manifolds/robust.py): robust-labelled poses first, then uncertain,
+    # fragile, futile; within each the highest robust quality q_δ, then μs.
+    ROBUST = "robust"
+    # The pointwise ranking: DEFAULT_RANK below, the pose's own value.
+    POINT = "point"
 
 
 # The ranking of /best and best_poses when none is asked for: the torque margin, which every
@@ -235,8 +280,19 @@ class Rank(StrEnum):
 # benchmarks/results/metric_validity.json, docs/metrics.md "What /best ranks by"); it is kept,
 # shown beside, and breaks ties — and ranks alone where the margin was not measured.
 DEFAULT_RANK = Rank.TORQUE_MARGIN_RATIO
+# What /best ranks by when none is asked for: the grasp that survives the robot's pose error
+# (issue 18). rank=point gives DEFAULT_RANK, the pose's own value.
+BEST_DEFAULT_RANK = Rank.ROBUST
 # Where a lower value is the better grasp: it still holds with less friction or less effort.
 LOWER_IS_BETTER = frozenset({Rank.FRICTION_MARGIN, Rank.TORQUE_MARGIN_NM})
+
+
+def lattice_of_exploration(session: Session, exploration_id: int) -> Lattice:
+    """The lattice of an exploration's spec."""
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    return lattice_of(spec_of(row))
 
 
 def best_poses(
@@ -249,13 +305,23 @@ def best_poses(
     max_effort_nm: float | None = None,
     limit: int = 1,
     rank: Rank | str = DEFAULT_RANK,
+    coarser: int = 0,
 ) -> list[PoseRow]:
     """Viable poses, best first by `rank` (then μs desc, then key), optionally inside one
     manifold, an approach cone, and below a joint effort.
 
     Higher is better except for the LOWER_IS_BETTER ranks; poses without the ranking value
-    (NULL: the test was not run) come after every pose that has it."""
+    (NULL: the test was not run) come after every pose that has it. `Rank.ROBUST` ranks by the
+    robust map at δ = `coarser` steps: at the finest step by the stored scores (label, then
+    robust_q; poses the map has not scored yet last), at a coarser one by scores computed
+    here over the stored samples (`robust_scores`)."""
     rank = Rank(rank)
+    if rank == Rank.POINT:
+        rank = DEFAULT_RANK
+    if rank == Rank.ROBUST and coarser > 0:
+        return _best_robust_coarser(session, exploration_id, label=label, cone_axis=cone_axis,
+                                    cone_half_angle=cone_half_angle,
+                                    max_effort_nm=max_effort_nm, limit=limit, coarser=coarser)
     if session.get(ExplorationRow, exploration_id) is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
     query = select(PoseRow).where(PoseRow.exploration_id == exploration_id, PoseRow.viable)
@@ -269,6 +335,11 @@ def best_poses(
         query = query.where(PoseRow.effort_max_nm <= max_effort_nm)
     if rank == Rank.MU_S:
         query = query.order_by(PoseRow.mu_s.desc(), PoseRow.pose_key)
+    elif rank == Rank.ROBUST:
+        order = case({lab.value: LABEL_ORDER[lab] for lab in RobustLabel},
+                     value=PoseRow.robust_label, else_=len(LABEL_ORDER))
+        query = query.order_by(order, PoseRow.robust_q.desc().nulls_last(), PoseRow.mu_s.desc(),
+                               PoseRow.pose_key)
     else:
         column = getattr(PoseRow, rank.value)
         first = column.asc() if rank in LOWER_IS_BETTER else column.desc()
@@ -287,4 +358,80 @@ def best_poses(
         out.append(row)
         if len(out) >= limit:
             break
+    return out
+
+
+def _best_robust_coarser(session: Session, exploration_id: int, *, label: int | None,
+                         cone_axis: tuple[float, float, float] | None,
+                         cone_half_angle: float | None, max_effort_nm: float | None,
+                         limit: int, coarser: int) -> list[PoseRow]:
+    """The robust ranking at δ = 2^coarser finest steps: every candidate passing the filters
+    (best_poses by μs, no limit), scored over the stored samples, sorted by `robust_order`."""
+    candidates = best_poses(session, exploration_id, label=label, cone_axis=cone_axis,
+                            cone_half_angle=cone_half_angle, max_effort_nm=max_effort_nm,
+                            limit=2**62, rank=Rank.MU_S)
+    if not candidates:
+        return []
+    lattice = lattice_of_exploration(session, exploration_id)
+    samples = load_samples(session, exploration_id, lattice)
+    point_of = {s.key: p for p, s in samples.items()}
+    points = [point_of[r.pose_key] for r in candidates if r.pose_key in point_of]
+    scores = robust_scores(lattice, samples, points, coarser=coarser)
+    ranked = sorted(points, key=lambda p: robust_order(samples[p], scores[p]))[:limit]
+    by_key = {r.pose_key: r for r in candidates}
+    return [by_key[samples[p].key] for p in ranked]
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What backs a pose's robust score: its N_δ ∪ {p} at the δ asked for, and the evaluations
+    made for its certification (poses whose `certifies` is its key)."""
+
+    score: RobustScore | None  # None: the pose is not on the lattice
+    neighbours: int  # members of N_δ(p)
+    neighbours_known: int  # of them stored (evaluated or shortcut-inferred)
+    neighbours_evaluated: int  # of them simulated by a worker
+    neighbours_held: int  # of them held with p's target grasp type
+    certifying: int  # poses stored for p's certification
+    certifying_held: int  # of them held (viable)
+
+
+def robust_evidence(session: Session, exploration_id: int, rows: list[PoseRow], *,
+                    coarser: int = 0) -> list[Evidence]:
+    """The robust score at δ and its evidence for each of a few poses (/best's answer): their
+    neighbourhoods read by key, not the whole exploration."""
+    if not rows:
+        return []
+    lattice = lattice_of_exploration(session, exploration_id)
+    hood = Neighbourhoods(lattice, coarser)
+    own = load_samples(session, exploration_id, lattice, [r.pose_key for r in rows])
+    point_of = {s.key: p for p, s in own.items()}
+    hoods = {p: hood(p) for p in own}
+    keys = {lattice.pose(q).key() for qs in hoods.values() for q in qs}
+    samples = {**load_samples(session, exploration_id, lattice, keys), **own}
+    wanted = [r.pose_key for r in rows]
+    cert: dict[str, list[bool]] = {}
+    for i in range(0, len(wanted), _KEY_CHUNK):
+        for key, viable in session.execute(
+            select(PoseRow.certifies, PoseRow.viable).where(
+                PoseRow.exploration_id == exploration_id,
+                PoseRow.certifies.in_(wanted[i : i + _KEY_CHUNK]))):
+            cert.setdefault(key, []).append(bool(viable))
+    out = []
+    for row in rows:
+        held_cert = cert.get(row.pose_key, [])
+        p = point_of.get(row.pose_key)
+        if p is None:
+            out.append(Evidence(None, 0, 0, 0, 0, len(held_cert), sum(held_cert)))
+            continue
+        members = [samples.get(q) for q in hoods[p]]
+        sc = score(samples[p], members)
+        known = [m for m in members if m is not None]
+        target = frozenset(sc.target) if sc.target is not None else None
+        out.append(Evidence(
+            score=sc, neighbours=len(members), neighbours_known=len(known),
+            neighbours_evaluated=sum(1 for m in known if m.source == "evaluated"),
+            neighbours_held=sum(1 for m in known if m.viable and m.digits == target),
+            certifying=len(held_cert), certifying_held=sum(held_cert),
+        ))
     return out

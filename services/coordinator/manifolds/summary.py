@@ -3,6 +3,13 @@
 Labels are stable: components are ordered by volume (largest first), ties by their smallest
 pose key, then named A, B, C… The best grasp is the member with the highest μs (ties: the
 smaller key); local maxima are those of `refine.local_maxima`.
+
+The robust map (manifolds/robust.py) rides along: every sample's robust score over N_δ (the
+finest step), per manifold its robust core (count and volume, measured on the finest lattice
+like the manifold's own volume) and its robust best grasp (`robust_order`: robust-labelled
+members first, then uncertain, fragile, futile; within each the highest q_δ, then μs, then the
+smaller key), and whether it is large (≥ 1 % of the viable volume). The table shows the
+manifolds that are not large as one dust line (`table_rows_of`).
 """
 
 from __future__ import annotations
@@ -24,7 +31,15 @@ from graspscape.services.coordinator.manifolds.grouping import (
     label_name,
     volumes,
 )
-from pydantic import BaseModel
+from graspscape.services.coordinator.manifolds.robust import (
+    LARGE_SHARE,
+    RobustLabel,
+    RobustScore,
+    large_manifolds,
+    robust_core,
+    robust_scores,
+)
+from pydantic import BaseModel, Field
 
 
 class _Keyed(BaseModel):
@@ -43,6 +58,32 @@ class PoseBrief(PoseValues, _Keyed):
         )
 
 
+class RobustBrief(PoseBrief):
+    """A pose with its robust score over N_δ (manifolds/robust.py)."""
+
+    s: float = Field(description="robust success s_δ: share of N_δ ∪ {p} held with its type")
+    q: float = Field(description="robust quality q_δ: mean μs over N_δ ∪ {p}, 0 off the type")
+    robust_label: str = Field(description="robust, fragile, futile or uncertain")
+    known: int = Field(description="members of N_δ ∪ {p} stored")
+    total: int = Field(description="members of N_δ ∪ {p}")
+
+    @staticmethod
+    def of_score(s: StoredPose, sc: RobustScore) -> RobustBrief:
+        return RobustBrief(**PoseBrief.of(s).model_dump(), s=sc.s, q=sc.q,
+                           robust_label=sc.label.value, known=sc.known, total=sc.total)
+
+
+# Where each label ranks when choosing a robust best: a pose known to be robust first, one
+# that may be (uncertain) before one known not to be.
+LABEL_ORDER = {RobustLabel.ROBUST: 0, RobustLabel.UNCERTAIN: 1, RobustLabel.FRAGILE: 2,
+               RobustLabel.FUTILE: 3}
+
+
+def robust_order(s: StoredPose, sc: RobustScore) -> tuple[int, float, float, str]:
+    """Sort key of the robust ranking, best first."""
+    return (LABEL_ORDER[sc.label], -sc.q, -s.mu_s, s.key)
+
+
 class ManifoldSummary(BaseModel):
     label: int
     name: str
@@ -57,6 +98,14 @@ class ManifoldSummary(BaseModel):
     mu_s_std: float
     best: PoseBrief
     local_maxima: list[PoseBrief]
+    # The robust map (defaults: summaries stored before it; migration 0010 recomputes them).
+    core_count: int = Field(default=0, description="members in the robust core")
+    core_volume_cm3: float | None = Field(
+        default=None, description="volume of the robust core (members whose whole N_δ is "
+        "stored and in this manifold)")
+    robust_best: RobustBrief | None = Field(
+        default=None, description="the best member by the robust ranking")
+    large: bool = Field(default=True, description="at least 1 % of the viable volume")
 
 
 class ManifoldMap(BaseModel):
@@ -67,6 +116,20 @@ class ManifoldMap(BaseModel):
     manifolds: list[ManifoldSummary]
     assignment: dict[str, int]  # pose key → label
     non_viable_volume_cm3: float
+    viable_volume_cm3: float = 0.0  # every position labelled viable, once
+    robust: dict[str, RobustScore] = Field(default_factory=dict)  # pose key → score
+
+
+def _position_volume(lattice: Lattice, fine: FineLabels, points: set[Point]) -> float:
+    """m³ of the finest-lattice positions of `points` (a position once, whatever attitudes):
+    the weights `fine_labels` gives them, found by its layout (cells × r indices × attitudes)."""
+    if not points:
+        return 0.0
+    cell = {kj: c for c, kj in enumerate(lattice.cells(lattice.depth))}
+    n_i = (lattice.n_r << lattice.depth) + 1
+    n_a = len(lattice.attitudes)
+    positions = {cell[(p.ring, p.azimuth)] * n_i + p.r_index for p in points}
+    return float(sum(fine.weights[pos * n_a] for pos in positions))
 
 
 def build_map(
@@ -88,10 +151,17 @@ def build_map(
     def lookup(p: Point) -> StoredPose | None:
         return samples.get(p)
 
+    scores = robust_scores(lattice, samples)
+    viable_mask = fine.labels >= 0
+    _, first = np.unique(fine.position_ids[viable_mask], return_index=True)
+    viable_volume = float(fine.weights[viable_mask][first].sum())
+    large = set(large_manifolds([vols[i] for i in order], viable_volume, LARGE_SHARE))
     out = []
     for old in order:
         members = comps[old]
         ss = [samples[p] for p in members]
+        core = robust_core(lattice, samples, members)
+        top = min(members, key=lambda p: robust_order(samples[p], scores[p]))
         mus = [s.mu_s for s in ss]
         best = min(ss, key=lambda s: (-s.mu_s, s.key))
         maxima = local_maxima(lattice, members, lookup, top=maxima_per_manifold)
@@ -115,6 +185,10 @@ def build_map(
                 mu_s_std=statistics.pstdev(mus),
                 best=PoseBrief.of(best),
                 local_maxima=[PoseBrief.of(samples[p]) for p in maxima],
+                core_count=len(core),
+                core_volume_cm3=round(_position_volume(lattice, fine, core) * 1e6, 3),
+                robust_best=RobustBrief.of_score(samples[top], scores[top]),
+                large=label in large,
             )
         )
     mask = fine.labels < 0
@@ -124,6 +198,8 @@ def build_map(
         manifolds=out,
         assignment={samples[p].key: label for p, label in label_of.items()},
         non_viable_volume_cm3=round(non_viable, 3),
+        viable_volume_cm3=round(viable_volume * 1e6, 3),
+        robust={samples[p].key: sc for p, sc in scores.items()},
     )
     return result, fine, label_of
 
@@ -134,16 +210,39 @@ def table_rows(m: ManifoldMap) -> list[dict[str, Any]]:
 
 
 def table_rows_of(manifolds: list[ManifoldSummary]) -> list[dict[str, Any]]:
-    return [
-        {
+    """One row per large manifold, then the dust (every manifold under 1 % of the viable
+    volume) as one row: how many, their poses and total volume."""
+    rows: list[dict[str, Any]] = []
+    for s in manifolds:
+        if not s.large:
+            continue
+        rb = s.robust_best
+        rows.append({
             "label": s.name,
             "description": s.description,
             "poses": s.pose_count,
             "evaluated": s.evaluated_count,
             "volume_cm3": s.volume_cm3,
+            "core_volume_cm3": s.core_volume_cm3,
             "mu_s_mean": round(s.mu_s_mean, 4),
             "mu_s_max": round(s.mu_s_max, 4),
             "best": s.best.key,
-        }
-        for s in manifolds
-    ]
+            "robust_best": rb.key if rb else None,
+            "robust_best_q": round(rb.q, 4) if rb else None,
+            "robust_best_s": round(rb.s, 4) if rb else None,
+            "robust_best_label": rb.robust_label if rb else None,
+        })
+    dust = [s for s in manifolds if not s.large]
+    if dust:
+        rows.append({
+            "label": "dust",
+            "description": f"{len(dust)} manifolds under {LARGE_SHARE:.0%} of the viable "
+                           "volume each",
+            "manifolds": len(dust),
+            "poses": sum(s.pose_count for s in dust),
+            "evaluated": sum(s.evaluated_count for s in dust),
+            "volume_cm3": round(sum(s.volume_cm3 for s in dust), 3),
+            "core_volume_cm3": round(sum(s.core_volume_cm3 or 0.0 for s in dust), 3),
+            "mu_s_max": round(max(s.mu_s_max for s in dust), 4),
+        })
+    return rows

@@ -206,3 +206,44 @@ def test_large_manifolds_and_dust_split_at_one_percent_of_the_viable_volume() ->
     d = dust(volumes, viable)
     assert (d.indices, d.count) == ([3, 4, 5], 3) and d.volume == pytest.approx(1.49)
     assert large_manifolds(volumes, viable, share=0.05) == [0, 1]
+
+
+def test_the_manifold_table_carries_core_robust_best_and_dust() -> None:
+    """build_map on a cap within 130° of +z (20° grid) and a lone held pose at the south pole:
+    the cap is large, with its core and its robust best (the first by `robust_order`); the
+    lone pose is dust (0.9 % of the viable volume), shown as one line of the table."""
+    import numpy as np
+    from graspscape.services.coordinator.manifolds.summary import (
+        build_map,
+        robust_order,
+        table_rows,
+    )
+
+    lattice = Lattice(PoseGridSpec(dtheta=math.radians(20), r_min=0.01, r_max=0.01), 0)
+    points = finest_points(lattice)
+    cap = {p for p in points if lattice.direction(p)[2] > math.cos(math.radians(130))}
+    south = Point(lattice.n_rings, 0, 0, 0)
+
+    def mu(p: Point) -> float:
+        return 0.99 if p == south else round(0.5 + 0.3 * lattice.direction(p)[2], 9)
+
+    samples = {p: pose(p, POWER if p in cap or p == south else None, mu(p)) for p in points}
+    mmap, _, label_of = build_map(lattice, samples, lambda d: np.full(len(d), 0.05))
+    disc, lone = mmap.manifolds
+    assert {label_of[p] for p in cap} == {0} and label_of[south] == 1
+    assert disc.large and not lone.large
+    assert lone.volume_cm3 < 0.01 * mmap.viable_volume_cm3 < disc.volume_cm3
+    core = robust_core(lattice, samples, cap)
+    assert disc.core_count == len(core) and 0 < disc.core_volume_cm3 < disc.volume_cm3
+    scores = robust_scores(lattice, samples)
+    top = min(cap, key=lambda p: robust_order(samples[p], scores[p]))
+    assert scores[top].label == RobustLabel.ROBUST
+    assert disc.robust_best.key == samples[top].key and disc.robust_best.robust_label == "robust"
+    assert disc.robust_best.q == pytest.approx(scores[top].q)
+    assert lone.best.mu_s == 0.99 and lone.robust_best.robust_label != "robust"
+    assert mmap.robust[samples[south].key] == scores[south]
+    rows = table_rows(mmap)
+    assert [r["label"] for r in rows] == ["A", "dust"]
+    assert rows[0]["robust_best"] == disc.robust_best.key
+    assert (rows[1]["manifolds"], rows[1]["poses"]) == (1, 1)
+    assert rows[1]["volume_cm3"] == lone.volume_cm3
