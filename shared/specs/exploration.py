@@ -165,6 +165,34 @@ class ShortcutsSpec(BaseModel):
     )
 
 
+class CertificationSpec(BaseModel):
+    """The adaptive strategy's last stage (services/coordinator/exploration/certify.py): after
+    border refinement and local search, evaluate the missing finest-lattice neighbours N_δ of
+    each large manifold's candidate grasps, and K deterministic jitters of the stated pose
+    error around each returned best grasp, so that a robust claim rests on evaluated
+    neighbours rather than on an interpolated map (docs/exploration.md, "Certification")."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    share: float = Field(
+        default=0.05, ge=0.0, le=0.5,
+        description="budget: extra evaluations as a share of the exploration's other planned "
+        "poses, split evenly over the large manifolds (0: no certification)")
+    candidates: int = Field(
+        default=3, ge=0, le=20,
+        description="per large manifold, its best poses by point quality (μs) whose N_δ is "
+        "completed, besides its current robust best")
+    pose_error_mm: float = Field(
+        default=2.0, ge=0.0, le=50.0,
+        description="σ_pos: the robot's position error (one standard deviation, per axis), mm")
+    pose_error_deg: float = Field(
+        default=2.0, ge=0.0, le=45.0,
+        description="σ_ang: the robot's attitude error (one standard deviation, per axis), deg")
+    jitters: int = Field(
+        default=8, ge=0, le=64,
+        description="K: jittered poses evaluated around each returned best grasp (0: none)")
+
+
 class AdaptiveStrategySpec(BaseModel):
     """The paper's exploration: the coarse grid, border refinement down to
     `refinement.levels`, the shortcuts, local search rounds (docs/exploration.md)."""
@@ -285,6 +313,10 @@ class ExplorationSpec(BaseModel):
     )
     refinement: RefinementSpec = Field(default_factory=RefinementSpec)
     shortcuts: ShortcutsSpec = Field(default_factory=ShortcutsSpec)
+    certification: CertificationSpec = Field(
+        default_factory=CertificationSpec,
+        description="the adaptive strategy's certification of its best grasps (used by "
+        "'adaptive' with refinement levels ≥ 1 only)")
     label: str | None = Field(
         default=None, max_length=200, pattern=r"^[^\x00]*$", description="free text for humans"
     )

@@ -17,6 +17,9 @@ Counting rules:
   (`manifolds/behaviour.py` digits: fingers and palm). The behaviour test of the manifolds also
   compares contact positions and closures, but only between lattice neighbours; off-lattice
   poses (random, cmaes) have none, so the digit set is the notion every explorer shares;
+- *certification evaluations* are the evaluations the adaptive strategy planned to certify
+  its best grasps (exploration/certify.py: missing neighbours N_δ and jitters of the stated
+  pose error); they are evaluations like any other, and counted again on their own;
 - times are from the first lease (`explorations.started_at`) to the ingest time of the pose
   (`poses.created_at`, one per batch); "within 5 %" is the first viable pose with
   μs ≥ 0.95 × the final best μs.
@@ -24,10 +27,11 @@ Counting rules:
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from datetime import datetime
 from typing import Any
 
+from graspscape.services.coordinator.exploration.certify_store import certification_plans
 from graspscape.services.coordinator.exploration.service import get_exploration
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.service import DEFAULT_RANK, LOWER_IS_BETTER
@@ -44,6 +48,9 @@ class BudgetAccount(BaseModel):
 
     evaluations: int = Field(description="poses simulated by a worker (coordinator copies of "
                              "shortcuts 1 and 3 excluded)")
+    certification_evaluations: int = Field(
+        default=0, description="of the evaluations, those planned to certify the best grasps "
+        "(neighbours N_δ and jitters of the stated pose error; adaptive only)")
     poses_stored: int = Field(description="every stored pose, copies included")
     wall_time_s: float | None = Field(
         description="first lease to the last stored result; null before any")
@@ -73,9 +80,11 @@ def _seconds(start: datetime | None, end: datetime | None) -> float | None:
     return max(0.0, (end - start).total_seconds())
 
 
-def account(rows: Iterable[Any], started_at: datetime | None) -> BudgetAccount:
+def account(rows: Iterable[Any], started_at: datetime | None,
+            certification: Collection[str] = frozenset()) -> BudgetAccount:
     """The accounting of stored pose rows (PoseRow or anything with its attributes);
-    `started_at`: the exploration's first lease."""
+    `started_at`: the exploration's first lease; `certification`: the keys of the poses
+    planned for certification."""
     rows = list(rows)
     evaluated = [r for r in rows if not (r.worker_id or "").startswith("shortcut:")]
     viable = [r for r in rows if r.viable]
@@ -88,6 +97,7 @@ def account(rows: Iterable[Any], started_at: datetime | None) -> BudgetAccount:
                 if best_mu is not None and float(r.mu_s) >= NEAR_BEST * best_mu), default=None)
     return BudgetAccount(
         evaluations=len(evaluated),
+        certification_evaluations=sum(1 for r in evaluated if r.pose_key in certification),
         poses_stored=len(rows),
         wall_time_s=_seconds(started_at, max((r.created_at for r in rows), default=None)),
         best_mu_s=best_mu,
@@ -105,7 +115,7 @@ def exploration_budget(session: Session, exploration_id: int) -> ExplorationBudg
     """The accounting of one stored exploration. NotFound if there is none."""
     row = get_exploration(session, exploration_id=exploration_id)
     poses = session.scalars(select(PoseRow).where(PoseRow.exploration_id == exploration_id))
-    figures = account(poses, row.started_at)
+    figures = account(poses, row.started_at, set(certification_plans(session, exploration_id)))
     return ExplorationBudget(exploration_id=row.id,
                              strategy=str(row.spec.get("strategy", {}).get("name", "adaptive")),
                              status=row.status, **figures.model_dump())

@@ -5,15 +5,21 @@ decide into planned poses (evaluated once each) and inferred results. The schedu
 inside the ingest transaction, after the exploration's counter update, whose row lock makes
 the batches of one exploration take turns: each sees every result committed before it, so a
 pair of neighbours is always judged by whichever of its two results arrives last. When no
-tile is open any more, a round of local search is planned, or, after the last round, the
-manifolds are computed for good.
+tile is open any more, a round of local search is planned, then rounds of certification of
+the best grasps (exploration/certify.py), or, after the last, the manifolds are computed for
+good.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-from graspscape.services.coordinator.exploration import symmetry
+from graspscape.services.coordinator.exploration import certify, symmetry
+from graspscape.services.coordinator.exploration.certify_store import (
+    certification_plans,
+    certification_round,
+    mark_certifies,
+)
 from graspscape.services.coordinator.exploration.lattice import Point
 from graspscape.services.coordinator.exploration.object_symmetry import (
     hand_mirror,
@@ -63,6 +69,7 @@ class AdaptiveStrategy:
         # request (manifolds.service `ensure_manifolds`), not on every ingest.
         self.has_rounds = self.lattice.depth > 0
         self._samples: dict[Point, StoredPose] | None = None  # read by next_round, for progress
+        self._refreshed = False  # next_round stored the manifolds of these samples
 
     # --- the coarse pass -----------------------------------------------------------------
     def planned_poses(self) -> int:
@@ -88,9 +95,11 @@ class AdaptiveStrategy:
     def after_batch(self, batch: Batch) -> list[Planned]:
         """Refine borders, apply shortcuts: the poses the batch's results call for."""
         spec, lattice, session = self.spec, self.lattice, batch.session
-        new_points = sorted(
-            p for p in (point_or_none(lattice, r.pose) for r in batch.results) if p is not None
-        )
+        points = [(r.pose_key, point_or_none(lattice, r.pose)) for r in batch.results]
+        new_points = sorted(p for _, p in points if p is not None)
+        off_lattice = [key for key, p in points if p is None]
+        if off_lattice:  # jitters of the certification: name the pose each one certifies
+            mark_certifies(session, batch.exploration_id, off_lattice)
         if not new_points:
             return []
         orbits = symmetry_orbits(session, spec)
@@ -143,30 +152,45 @@ class AdaptiveStrategy:
 
     # --- when no tile is open ------------------------------------------------------------
     def next_round(self, batch: Batch) -> list[Planned]:
-        """The next round of local search from each manifold's best maxima, or nothing."""
-        rounds_done = batch.session.scalar(
+        """The next round of local search from each manifold's best maxima; once that is
+        over, the next round of certification (exploration/certify.py); or nothing."""
+        session, spec = batch.session, self.spec
+        rounds_done = session.scalar(
             select(func.count(func.distinct(TileRow.round))).where(
                 TileRow.exploration_id == batch.exploration_id, TileRow.round > 0)
         ) or 0
-        samples = self._samples = load_samples(batch.session, batch.exploration_id,
-                                               self.lattice)
-        if rounds_done >= self.spec.refinement.local_search_rounds:
+        samples = self._samples = load_samples(session, batch.exploration_id, self.lattice)
+        orbits = symmetry_orbits(session, spec)
+        certifying = bool(certification_plans(session, batch.exploration_id))
+        if rounds_done < spec.refinement.local_search_rounds and not certifying:
+            proposals: list[Proposal] = []
+            for comp in components(self.lattice, samples):
+                maxima = local_maxima(self.lattice, comp, samples.get,
+                                      top=spec.refinement.local_search_starts)
+                proposals += search_proposals(self.lattice, maxima, samples.get)
+            proposals = self._canonical(proposals, orbits)
+            proposals = [q for q in proposals if q.point not in samples]
+            if proposals:
+                # Search round k is the exploration's round k (1, 2, …): its tiles are leased
+                # after every tile of the rounds before, refinement included.
+                return self._planned(proposals, lambda q: q.level, round_=rounds_done + 1)
+        if (spec.certification.share <= 0
+                or rounds_done >= spec.refinement.local_search_rounds + certify.MAX_ROUNDS):
             return []
-        proposals: list[Proposal] = []
-        for comp in components(self.lattice, samples):
-            maxima = local_maxima(self.lattice, comp, samples.get,
-                                  top=self.spec.refinement.local_search_starts)
-            proposals += search_proposals(self.lattice, maxima, samples.get)
-        proposals = self._canonical(proposals, symmetry_orbits(batch.session, self.spec))
-        proposals = [q for q in proposals if q.point not in samples]
-        # Search round k is the exploration's round k (1, 2, …): its tiles are leased after
-        # every tile of the rounds before, refinement included.
-        return self._planned(proposals, lambda q: q.level, round_=rounds_done + 1)
+        # Certification reads the current manifolds, so they are stored now (the progress
+        # report of a new round then has nothing to add).
+        computed = refresh_manifolds(session, batch.exploration_id, spec, self.lattice,
+                                     samples=samples)
+        self._refreshed = True
+        return certification_round(session, batch.exploration_id, spec, computed, orbits,
+                                   rounds_done + 1)
 
     def progress(self, batch: Batch, stage: Stage) -> None:
         """The manifolds: throttled while tiles are open, for good when finished."""
         if stage == Stage.RUNNING:
             maybe_refresh(batch.session, batch.exploration_id, self.spec, self.lattice)
+        elif stage == Stage.NEW_ROUND and self._refreshed:
+            return
         else:
             refresh_manifolds(batch.session, batch.exploration_id, self.spec, self.lattice,
                               samples=self._samples, final=stage == Stage.FINISHED)

@@ -4,6 +4,7 @@ PostgreSQL), checked against what the evaluator itself saw."""
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from datetime import datetime, timedelta
 
@@ -43,9 +44,10 @@ def test_account_of_hand_made_rows_gives_the_known_figures() -> None:
         _row(9, viable=True, mu_s=0.8, links=("A_1", "B_3", "C_2")),  # the best, no margin
         _row(12, viable=False, outcome="error"),  # a miss too; the last result
     ]
-    got = account(rows, T0)
+    # Two poses planned for certification: the evaluated one counts, the copy does not.
+    got = account(rows, T0, {rows[4].pose_key, rows[2].pose_key})
     assert got.model_dump() == {
-        "evaluations": 5, "poses_stored": 6, "wall_time_s": 12.0, "best_mu_s": 0.8,
+        "evaluations": 5, "certification_evaluations": 1, "poses_stored": 6, "wall_time_s": 12.0, "best_mu_s": 0.8,
         "rank_metric": "torque_margin_ratio", "best_rank": 0.6,
         "grasp_types": 2,  # {A, B, C} and {A, B, palm}
         "grasps": 4, "misses": 2, "time_to_first_grasp_s": 2.0, "time_to_near_best_s": 5.0,
@@ -65,12 +67,16 @@ def test_account_of_nothing_and_of_misses_only() -> None:
 GRID = {"dtheta": math.radians(60), "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
 
 
-@pytest.mark.slow  # four whole explorations on both databases
+@pytest.mark.slow  # five whole explorations on both databases
 @pytest.mark.parametrize("strategy", [
     {"name": "adaptive"},
     {"name": "grid"},
     {"name": "random", "poses": 60, "seed": 2, "rounds": 2},
     {"name": "cmaes", "poses": 60, "seed": 2},
+    pytest.param({"name": "ppo", "poses": 60, "seed": 2, "batch": 16},
+                 marks=pytest.mark.skipif(
+                     importlib.util.find_spec("stable_baselines3") is None,
+                     reason="the optional extra rl is not installed")),
 ])
 def test_every_explorer_is_counted_the_same_way(client, sessions, object_id,
                                                 strategy: dict) -> None:
@@ -98,6 +104,9 @@ def test_every_explorer_is_counted_the_same_way(client, sessions, object_id,
     assert got["best_mu_s"] == pytest.approx(max(r.mu_s for r in viable))
     assert got["best_rank"] is None  # the oracle measures no torque margin
     assert got["grasp_types"] == 1  # the oracle's grasps all touch with A, B and C
+    # Only the adaptive strategy certifies; its certification evaluations are evaluations.
+    assert (got["certification_evaluations"] > 0) == (strategy["name"] == "adaptive")
+    assert got["certification_evaluations"] <= 0.05 * got["evaluations"] + 1
     if strategy["name"] == "adaptive":  # the symmetry shortcut's copies are grasps, not work
         assert got["poses_stored"] > got["evaluations"]
         assert got["grasps"] > len(viable)

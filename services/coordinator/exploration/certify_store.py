@@ -1,0 +1,291 @@
+"""Certification in the store: a round of it for the adaptive strategy, `poses.certifies`,
+and the robust best grasps with their evidence for a finished exploration.
+
+The decisions are exploration/certify.py's (pure); this module reads what they need (the
+manifold map, robust scores, what certification planned so far) and writes what they decide
+as plans. A certification plan's reason names the pose row it certifies
+(`certify.reason_for`); when a jitter's result is stored, `mark_certifies` copies the
+centre's key into the jitter's `certifies` column, which `/best` and the exports read.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from graspscape.services.coordinator.exploration import certify
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.exploration.samples import (
+    lattice_of,
+    load_samples,
+    point_or_none,
+)
+from graspscape.services.coordinator.exploration.specs import spec_of
+from graspscape.services.coordinator.exploration.strategies.base import Planned
+from graspscape.services.coordinator.exploration.symmetry import Orbits
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.grouping import FALLBACK_RADIUS, surface_radii
+from graspscape.services.coordinator.manifolds.robust import robust_scores
+from graspscape.services.coordinator.manifolds.service import ComputedMap
+from graspscape.services.coordinator.store.models import (
+    ExplorationRow,
+    ManifoldRow,
+    PosePlanRow,
+    PoseRow,
+)
+from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.pose import Pose
+from pydantic import BaseModel, Field
+from sqlalchemy import bindparam, select
+from sqlalchemy.orm import Session
+
+_KEY_CHUNK = 500
+
+
+def _chunks(items: Sequence[str]) -> list[Sequence[str]]:
+    return [items[i : i + _KEY_CHUNK] for i in range(0, len(items), _KEY_CHUNK)]
+
+
+def certification_plans(session: Session, exploration_id: int) -> dict[str, int]:
+    """Pose key → the id of the pose row it certifies, for every certification plan."""
+    rows = session.execute(
+        select(PosePlanRow.pose_key, PosePlanRow.reason).where(
+            PosePlanRow.exploration_id == exploration_id,
+            PosePlanRow.reason.like(f"{certify.REASON_PREFIX}%")))
+    out = {}
+    for key, reason in rows:
+        centre = certify.centre_id_of(reason)
+        if centre is not None:
+            out[key] = centre
+    return out
+
+
+def pose_of_key(key: str) -> Pose:
+    """The pose a pose key stands for (to its six decimals)."""
+    theta, phi, r, roll, pitch, yaw = (float(x) for x in key.split("/"))
+    return Pose(theta=theta, phi=phi, r=r, roll=roll, pitch=pitch, yaw=yaw)
+
+
+def _keys_of_ids(session: Session, ids: set[int]) -> dict[int, str]:
+    wanted = sorted(ids)
+    out: dict[int, str] = {}
+    for i in range(0, len(wanted), _KEY_CHUNK):
+        out.update(session.execute(select(PoseRow.id, PoseRow.pose_key).where(
+            PoseRow.id.in_(wanted[i : i + _KEY_CHUNK]))).all())
+    return out
+
+
+def mark_certifies(session: Session, exploration_id: int, keys: Sequence[str]) -> int:
+    """Set `certifies` (the centre's key) on the stored jitters among `keys`; returns how
+    many. Only off-lattice poses are jitters; a lattice member of N_δ is evidence for any
+    pose it neighbours, so it names none."""
+    if not keys:
+        return 0
+    centre_of: dict[str, int] = {}
+    for chunk in _chunks(sorted(set(keys))):
+        for key, reason in session.execute(
+            select(PosePlanRow.pose_key, PosePlanRow.reason).where(
+                PosePlanRow.exploration_id == exploration_id, PosePlanRow.pose_key.in_(chunk),
+                PosePlanRow.reason.like(f"{certify.REASON_PREFIX}%"))):
+            centre = certify.centre_id_of(reason)
+            if centre is not None:
+                centre_of[key] = centre
+    if not centre_of:
+        return 0
+    key_of = _keys_of_ids(session, set(centre_of.values()))
+    updates = [{"k": key, "c": key_of[c]} for key, c in sorted(centre_of.items()) if c in key_of]
+    if updates:
+        poses = PoseRow.__table__
+        session.connection().execute(
+            poses.update()
+            .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
+            .values(certifies=bindparam("c")),
+            updates,
+        )
+    return len(updates)
+
+
+def _radius(computed: ComputedMap) -> dict[Point, float]:
+    """Surface radius along each sample's direction (for the jitters' position error)."""
+    points = sorted(computed.samples)
+    if not points:
+        return {}
+    dirs = np.array([computed.lattice.direction(p) for p in points])
+    radii = surface_radii(computed.mesh, dirs, FALLBACK_RADIUS)
+    return {p: float(r) for p, r in zip(points, radii, strict=True)}
+
+
+def certification_round(session: Session, exploration_id: int, spec: ExplorationSpec,
+                        computed: ComputedMap, orbits: Orbits | None, round_: int
+                        ) -> list[Planned]:
+    """The next round of certification from the current map (module doc), as plans."""
+    cert = spec.certification
+    lattice, samples = computed.lattice, computed.samples
+    if cert.share <= 0:
+        return []
+    members: dict[int, list[Point]] = {}
+    for p, label in computed.label_of.items():
+        members.setdefault(label, []).append(p)
+    manifolds = certify.large([
+        certify.Manifold(m.label, tuple(sorted(members.get(m.label, []))), m.volume_cm3)
+        for m in computed.map.manifolds
+    ])
+    plans = certification_plans(session, exploration_id)
+    row = session.get(ExplorationRow, exploration_id)
+    other = (row.poses_total if row is not None else 0) - len(plans)
+    total, per_manifold = certify.budgets(cert, other, len(manifolds))
+    if not manifolds or total <= len(plans):
+        return []
+    point_of = {s.key: p for p, s in samples.items()}
+    centre_key = _keys_of_ids(session, set(plans.values()))
+    centre_point = {c: point_of.get(k) for c, k in centre_key.items()}
+    spent: dict[int, int] = {}
+    jittered: set[Point] = set()
+    for key, c in plans.items():
+        p = centre_point.get(c)
+        if p is None:
+            continue
+        if p in computed.label_of:
+            spent[computed.label_of[p]] = spent.get(computed.label_of[p], 0) + 1
+        if point_or_none(lattice, pose_of_key(key)) is None:
+            jittered.add(p)
+    scores = robust_scores(lattice, samples, [p for m in manifolds for p in m.members])
+    taken = set(point_of) | set(session.scalars(select(PosePlanRow.pose_key).where(
+        PosePlanRow.exploration_id == exploration_id)))
+    radius = _radius(computed)
+    work = certify.plan(
+        lattice, samples, manifolds, scores, cert, per_manifold=per_manifold,
+        budget_left=total - len(plans), spent=spent, jittered=jittered, taken=taken,
+        radius_m=lambda p: radius.get(p, FALLBACK_RADIUS))
+    if orbits is not None:
+        # A member is evaluated as its orbit's representative, mirrored onto it on arrival.
+        work = [w if w.point is None else certify.Work(
+            lattice.pose(orbits.representative(w.point)), orbits.representative(w.point),
+            w.centre, w.label) for w in work]
+    ids = {k: i for i, k in _ids_of_keys(session, exploration_id,
+                                         {samples[w.centre].key for w in work}).items()}
+    out: list[Planned] = []
+    seen: set[str] = set()
+    for w in work:
+        key = w.pose.key()
+        if key in seen or key in taken:
+            continue
+        seen.add(key)
+        out.append(Planned(
+            w.pose, plan_level=lattice.depth if w.point is None else lattice.birth(w.point),
+            tile_level=lattice.depth, reason=certify.reason_for(ids[samples[w.centre].key]),
+            round=round_))
+    return out
+
+
+def _ids_of_keys(session: Session, exploration_id: int, keys: set[str]) -> dict[int, str]:
+    out: dict[int, str] = {}
+    for chunk in _chunks(sorted(keys)):
+        out.update(session.execute(select(PoseRow.id, PoseRow.pose_key).where(
+            PoseRow.exploration_id == exploration_id, PoseRow.pose_key.in_(chunk))).all())
+    return out
+
+
+# --- what a finished exploration claims ------------------------------------------------------
+class CertifiedBest(BaseModel):
+    """The robust best grasp of one large manifold, with what backs it."""
+
+    label: str = Field(description="the manifold's name (A, B, …)")
+    volume_cm3: float
+    volume_share: float = Field(description="share of the viable volume")
+    core_volume_cm3: float | None = Field(description="its robust core's volume, where stored")
+    pose: Pose
+    key: str
+    s: float | None = Field(description="s_δ: share of N_δ ∪ {p} held with p's grasp type")
+    q: float | None = Field(description="q_δ: mean μs over N_δ ∪ {p}, 0 where not so held")
+    mu_s: float
+    robust_label: str | None
+    neighbours: int = Field(description="|N_δ|")
+    known: int = Field(description="members of N_δ stored (evaluated or inferred)")
+    held: int = Field(description="known members held with p's grasp type")
+    jitters: int = Field(description="jitters of the stated pose error evaluated around p")
+    jitters_held: int
+    certified: bool = Field(description="the robust claim (exploration/certify.py)")
+
+
+def jitter_samples(session: Session, exploration_id: int, centres: Sequence[str]
+                   ) -> dict[str, list[StoredPose]]:
+    """Stored jitters by the key of the pose they certify."""
+    out: dict[str, list[StoredPose]] = {}
+    for chunk in _chunks(sorted(set(centres))):
+        for row in session.scalars(select(PoseRow).where(
+                PoseRow.exploration_id == exploration_id, PoseRow.certifies.in_(chunk))):
+            out.setdefault(row.certifies, []).append(StoredPose.from_row(row))
+    return out
+
+
+def certified_bests(session: Session, exploration_id: int,
+                    samples: Mapping[Point, StoredPose] | None = None) -> list[CertifiedBest]:
+    """The robust best grasp of every large manifold of the stored manifold table, largest
+    first, with its certification evidence (the manifold table must be current:
+    manifolds.service.ensure_manifolds)."""
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        return []
+    spec = spec_of(row)
+    lattice: Lattice = lattice_of(spec)
+    samples = samples if samples is not None else load_samples(session, exploration_id, lattice)
+    rows = session.scalars(select(ManifoldRow).where(
+        ManifoldRow.exploration_id == exploration_id).order_by(ManifoldRow.label)).all()
+    point_of = {s.key: p for p, s in samples.items()}
+    members: dict[int, list[Point]] = {}
+    for key, mid in session.execute(select(PoseRow.pose_key, PoseRow.manifold_id).where(
+            PoseRow.exploration_id == exploration_id, PoseRow.manifold_id.is_not(None))):
+        if key in point_of:
+            members.setdefault(mid, []).append(point_of[key])
+    volume = {r.id: float((r.summary or {}).get("volume_cm3", 0.0)) for r in rows}
+    chosen = certify.large([certify.Manifold(r.id, tuple(sorted(members.get(r.id, []))),
+                                             volume[r.id]) for r in rows])
+    viable_volume = sum(volume.values())
+    scores = robust_scores(lattice, samples, [p for m in chosen for p in m.members])
+    by_id = {r.id: r for r in rows}
+    best: dict[int, Point] = {}
+    for m in chosen:
+        stored = by_id[m.label].robust_best_key
+        p = point_of.get(stored) if stored else None
+        p = p if p is not None else certify.robust_best(m.members, samples, scores)
+        if p is not None:
+            best[m.label] = p
+    shaken = jitter_samples(session, exploration_id, [samples[p].key for p in best.values()])
+    asked = spec.certification.jitters > 0 and (spec.certification.pose_error_mm > 0
+                                                 or spec.certification.pose_error_deg > 0)
+    out = []
+    for m in chosen:
+        if m.label not in best:
+            continue
+        p = best[m.label]
+        s = samples[p]
+        score = scores.get(p)
+        ev = certify.evidence(lattice, samples, p, score, shaken.get(s.key, []),
+                              jitters_asked=asked)
+        mrow = by_id[m.label]
+        core = mrow.core_volume_cm3
+        out.append(CertifiedBest(
+            label=(mrow.summary or {}).get("name", str(mrow.label)), volume_cm3=m.volume,
+            volume_share=m.volume / viable_volume if viable_volume else 0.0,
+            core_volume_cm3=None if core is None else float(core),
+            pose=Pose(theta=s.theta, phi=s.phi, r=s.r, roll=s.roll, pitch=s.pitch, yaw=s.yaw),
+            key=s.key, s=None if score is None else score.s,
+            q=None if score is None else score.q, mu_s=s.mu_s, robust_label=ev.label,
+            neighbours=ev.neighbours, known=ev.known, held=ev.held, jitters=ev.jitters,
+            jitters_held=ev.jitters_held, certified=ev.certified))
+    return out
+
+
+def format_best(b: CertifiedBest) -> str:
+    """One line of `graspscape explore`'s closing table."""
+    core = "?" if b.core_volume_cm3 is None else f"{b.core_volume_cm3:.1f}"
+    s = "?" if b.s is None else f"{b.s:.2f}"
+    q = "?" if b.q is None else f"{b.q:.3f}"
+    claim = "certified robust" if b.certified else f"not certified ({b.robust_label})"
+    return (f"  {b.label}: {b.volume_cm3:.1f} cm³ ({100 * b.volume_share:.0f} %), core {core} "
+            f"cm³; s {s}, q {q}, μs {b.mu_s:.3f} at θ {math.degrees(b.pose.theta):.1f}° "
+            f"φ {math.degrees(b.pose.phi):.1f}° r {1000 * b.pose.r:.1f} mm roll "
+            f"{math.degrees(b.pose.roll):.0f}°; N_δ {b.known}/{b.neighbours} known, "
+            f"{b.held} held; jitters {b.jitters_held}/{b.jitters} held; {claim}")

@@ -1,0 +1,220 @@
+"""Certification of the adaptive strategy's best grasps (exploration/certify.py).
+
+Pure: the jitters of a stated pose error are deterministic, near their centre and extend
+with K; a plan completes the robust best's N_δ first, jitters it only once that is known,
+and keeps to its budget. Through the real store and scheduler (SQLite and PostgreSQL) with an
+oracle as the evaluator: a lone held pose among drops is never claimed robust, a pose inside
+a large uniform held region is, and the same spec gives the same certification plan."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from graspscape.services.coordinator.exploration import certify
+from graspscape.services.coordinator.exploration.accounting import exploration_budget
+from graspscape.services.coordinator.exploration.certify_store import (
+    certification_plans,
+    certified_bests,
+    pose_of_key,
+)
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.robust import neighbourhood, robust_scores
+from graspscape.services.coordinator.objects.service import create_named
+from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
+from graspscape.services.local.run import run_local
+from graspscape.shared.specs.exploration import (
+    CertificationSpec,
+    ExplorationSpec,
+    PoseGridSpec,
+)
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import Outcome, PoseResult
+from sqlalchemy import select
+
+from tests.factories import oracle_result
+
+GRID = PoseGridSpec(dtheta=0.6, r_min=0.0, r_max=0.02, dr=0.01)
+LATTICE = Lattice(GRID, 1)
+# A coarse point (θ = 2π/5, r = 0) that the "lone" oracle holds alone.
+LONE = Point(LATTICE.scale(0) * 2, 0, 0, 0)
+# Certification with room for N_δ and the jitters on a ~100-pose exploration.
+CERT = CertificationSpec(share=0.5, candidates=1, pose_error_mm=2.0, pose_error_deg=2.0,
+                         jitters=4)
+
+
+# --- pure ----------------------------------------------------------------------------------
+def test_jitters_are_deterministic_near_their_centre_and_extend_with_k() -> None:
+    centre = Pose(theta=1.0, phi=2.0, r=0.005, roll=0.5)
+    a = certify.jitters(centre, radius_m=0.05, sigma_pos_m=0.002,
+                        sigma_ang_rad=math.radians(2), k=8)
+    b = certify.jitters(centre, radius_m=0.05, sigma_pos_m=0.002,
+                        sigma_ang_rad=math.radians(2), k=12)
+    assert len(a) == 8 and a == b[:8]
+    assert len({p.key() for p in b}) == 12 and centre.key() not in {p.key() for p in b}
+    for p in b:
+        # 5 σ: 10 mm over a reach of 55 mm is at most ~0.18 rad of direction.
+        u = (math.sin(p.theta) * math.cos(p.phi), math.sin(p.theta) * math.sin(p.phi),
+             math.cos(p.theta))
+        c = (math.sin(1.0) * math.cos(2.0), math.sin(1.0) * math.sin(2.0), math.cos(1.0))
+        assert math.acos(min(1.0, sum(x * y for x, y in zip(u, c, strict=True)))) < 0.2
+        assert 0.0 <= p.r <= 0.015
+        assert abs(math.remainder(p.roll - 0.5, 2 * math.pi)) < math.radians(10)
+        assert abs(p.pitch) < math.radians(10) and abs(p.yaw) < math.radians(10)
+    other = certify.jitters(centre.model_copy(update={"phi": 2.1}), radius_m=0.05,
+                            sigma_pos_m=0.002, sigma_ang_rad=math.radians(2), k=8)
+    assert {p.key() for p in other}.isdisjoint(p.key() for p in a)
+    assert certify.jitters(centre, radius_m=0.05, sigma_pos_m=0.0, sigma_ang_rad=0.0,
+                           k=8) == []
+
+
+def _held(p: Point, mu: float = 0.5) -> StoredPose:
+    pose = LATTICE.pose(p)
+    return StoredPose(key=pose.key(), theta=pose.theta, phi=pose.phi, r=pose.r, roll=pose.roll,
+                      pitch=pose.pitch, yaw=pose.yaw, viable=True, outcome="held", mu_s=mu,
+                      digits=frozenset({"A", "B", "C"}))
+
+
+def test_plan_completes_the_robust_best_first_then_jitters_it_within_budget() -> None:
+    samples = {LONE: _held(LONE, 0.9)}
+    manifolds = [certify.Manifold(0, (LONE,), 1.0)]
+    hood = neighbourhood(LATTICE, LONE)
+
+    def plan(budget: int, jittered: set[Point] = frozenset()) -> list[certify.Work]:
+        return certify.plan(LATTICE, samples, manifolds, robust_scores(LATTICE, samples),
+                            CERT, per_manifold=budget, budget_left=budget, spent={},
+                            jittered=set(jittered), taken=set(), radius_m=lambda p: 0.05)
+
+    work = plan(100)
+    # Its neighbours, all of them, and no jitter while they are unknown.
+    assert [w.point for w in work] == hood and {w.centre for w in work} == {LONE}
+    assert [w.point for w in plan(3)] == hood[:3]
+    # Once N_δ is known (here: all dropped), the K jitters, all or none.
+    for q in hood:
+        pose = LATTICE.pose(q)
+        samples[q] = StoredPose(key=pose.key(), theta=pose.theta, phi=pose.phi, r=pose.r,
+                                roll=pose.roll, pitch=pose.pitch, yaw=pose.yaw, viable=False,
+                                outcome="no_grasp", mu_s=0.0)
+    work = plan(100)
+    assert [w.point for w in work] == [None] * CERT.jitters
+    assert plan(CERT.jitters - 1) == [] and plan(100, {LONE}) == []
+    # And the claim: every neighbour known, none held: not robust, whatever the jitters say.
+    score = robust_scores(LATTICE, samples, [LONE])[LONE]
+    ev = certify.evidence(LATTICE, samples, LONE, score, [samples[LONE]] * 4,
+                          jitters_asked=True)
+    assert (ev.known, ev.held, ev.jitters_held, ev.certified) == (len(hood), 0, 4, False)
+
+
+def test_budget_is_a_share_of_the_other_planned_poses_split_over_large_manifolds() -> None:
+    assert certify.budgets(CertificationSpec(), 1000, 3) == (50, 16)
+    assert certify.budgets(CertificationSpec(share=0.0), 1000, 3) == (0, 0)
+    assert certify.budgets(CertificationSpec(), 1000, 0) == (50, 0)
+    assert certify.centre_id_of(certify.reason_for(12345)) == 12345
+    assert certify.centre_id_of("search") is None
+
+
+# --- through the store and the scheduler -----------------------------------------------
+def _dropped(pose: Pose) -> PoseResult:
+    return PoseResult(pose=pose, pose_key=pose.key(), outcome=Outcome.NO_GRASP, viable=False,
+                      mu_s=0.0)
+
+
+def _lone(pose: Pose) -> PoseResult:
+    """Held at LONE only (to the key), dropped everywhere else."""
+    if pose.key() != LATTICE.pose(LONE).key():
+        return _dropped(pose)
+    return oracle_result(pose).model_copy(update={"mu_s": 0.9})
+
+
+def _cap(pose: Pose) -> PoseResult:
+    """One grasp type of one quality held over the cap θ < 1.1 (the oracle's contacts and
+    joints: they slide with the approach), dropped elsewhere except at LONE."""
+    if pose.theta >= 1.1 and pose.key() != LATTICE.pose(LONE).key():
+        return _dropped(pose)
+    held = oracle_result(pose.model_copy(update={"phi": 0.1, "r": 0.0}))
+    return held.model_copy(update={"pose": pose, "pose_key": pose.key(), "mu_s": 0.6})
+
+
+def _explore(sessions, object_id: int, oracle, *, workers: int = 2, seed: int = 1,
+             search_rounds: int = 3) -> int:
+    spec = ExplorationSpec(object_id=object_id, grid=GRID, certification=CERT,
+                           refinement={"levels": 1, "local_search_rounds": search_rounds})
+
+    def evaluate(poses, match=None):  # type: ignore[no-untyped-def]
+        return [oracle(p) for p in poses]
+
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=20, max_poses=10**6).id
+    run_local(sessions, evaluate, workers=workers, seed=seed, split=2)
+    return eid
+
+
+def _point(key: str) -> Point:
+    return LATTICE.point(pose_of_key(key))
+
+
+def _plan_of(sessions, eid: int) -> list[tuple[str, str]]:
+    """(pose key, key of the pose it certifies) of every certification plan."""
+    with sessions() as s:
+        plans = certification_plans(s, eid)
+        key_of = dict(s.execute(select(PoseRow.id, PoseRow.pose_key)
+                                .where(PoseRow.id.in_(set(plans.values())))).all())
+    return sorted((k, key_of[c]) for k, c in plans.items())
+
+
+def _sphere(sessions) -> int:
+    with sessions() as s:
+        return create_named(s, name="sphere", properties={}, shared_dir=None)[0].id
+
+
+# SQLite only, to stay in the default suite (~1.5 s); the slow test below runs the same
+# machinery on both databases.
+def test_a_lone_held_pose_is_never_claimed_robust(sqlite_sessions) -> None:
+    sessions = sqlite_sessions
+    eid = _explore(sessions, _sphere(sessions), _lone)
+    lone_key = LATTICE.pose(LONE).key()
+    with sessions() as s:
+        assert s.get(ExplorationRow, eid).status == "done"
+        bests = certified_bests(s, eid)
+        jitters = list(s.scalars(select(PoseRow).where(PoseRow.exploration_id == eid,
+                                                       PoseRow.certifies == lone_key)))
+        budget = exploration_budget(s, eid)
+    # It is the only grasp, so the only (large) manifold's best: certification completed its
+    # neighbourhood and jittered it, and every neighbour and jitter dropped.
+    assert [b.key for b in bests] == [lone_key]
+    (best,) = bests
+    assert best.neighbours == len(neighbourhood(LATTICE, LONE))
+    assert (best.known, best.held) == (best.neighbours, 0)
+    assert len(jitters) == CERT.jitters and not any(j.viable for j in jitters)
+    assert (best.jitters, best.jitters_held) == (CERT.jitters, 0)
+    assert best.robust_label != "robust" and not best.certified
+    # Border refinement had evaluated its neighbours already (they all differ from it): the
+    # certification's own evaluations are the jitters, and the budget counts them.
+    plan = _plan_of(sessions, eid)
+    assert {c for _, c in plan} == {lone_key}
+    assert budget.certification_evaluations == len(plan) == CERT.jitters
+
+
+@pytest.mark.slow  # two whole explorations per database
+def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
+        sessions) -> None:
+    object_id = _sphere(sessions)
+    # No local search: certification follows refinement, which leaves the inside alone.
+    eid = _explore(sessions, object_id, _cap, search_rounds=0)
+    with sessions() as s:
+        bests = certified_bests(s, eid)
+    # One large manifold (the cap); LONE is dust and never returned.
+    assert len(bests) == 1 and bests[0].key != LATTICE.pose(LONE).key()
+    (best,) = bests
+    assert best.certified and best.robust_label == "robust"
+    assert best.known == best.neighbours == best.held
+    assert best.jitters == best.jitters_held == CERT.jitters
+    # Certification completed N_δ itself (refinement evaluated nothing inside the region).
+    plan = _plan_of(sessions, eid)
+    members = {LATTICE.pose(q).key() for q in neighbourhood(LATTICE, _point(best.key))}
+    assert members & {k for k, c in plan if c == best.key}
+    # Same spec, other worker count and report order: the same certification plan.
+    again = _explore(sessions, object_id, _cap, workers=3, seed=7, search_rounds=0)
+    assert _plan_of(sessions, again) == plan
