@@ -24,9 +24,10 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 CHUNK_ROWS = 2000
-# The per-pose qualities every export carries besides success: μs, the largest joint torque
-# and the stored grasp metrics and margins (NaN where not computed).
-QUALITIES = ("mu_s", "effort_max_nm", *POSE_METRIC_COLUMNS)
+# The per-pose qualities every export carries besides success: μs, the largest joint torque,
+# the stored grasp metrics and margins, and the robust map's robust success and quality
+# (manifolds/robust.py) (NaN where not computed).
+QUALITIES = ("mu_s", "effort_max_nm", *POSE_METRIC_COLUMNS, "robust_s", "robust_q")
 _POSE = (PoseRow.theta, PoseRow.phi, PoseRow.r, PoseRow.roll, PoseRow.pitch, PoseRow.yaw)
 
 

@@ -4,7 +4,9 @@ Pose rows are flat: the pose, its outcome and μs, effort, the manifold label (l
 when none), where the result came from (evaluated by a worker or a shortcut), the digits in
 contact, the grasp configuration and signature as JSON text, then the static grasp metrics
 (μg, μf, μm) and the robustness margins and tests (empty in CSV, null in Parquet, where the
-worker did not compute them), and the error message last.
+worker did not compute them), the robust map's robust_s, robust_q and robust_label
+(manifolds/robust.py; empty/null before the manifolds were computed with the pose), and the
+error message last.
 
 Pose exports are written in chunks of CHUNK rows read from one server-side cursor, so memory
 stays bounded however large the exploration (a 5M-pose exploration is allowed): CSV as text
@@ -31,11 +33,12 @@ from graspscape.services.coordinator.store.models import (
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+ROBUST_COLUMNS = ("robust_s", "robust_q", "robust_label")
 COLUMNS = (
     "pose_key", "theta", "phi", "r", "roll", "pitch", "yaw", "outcome", "viable", "mu_s",
     "effort_max_nm", "effective_r", "manifold", "source", "inferred_from", "links_in_contact",
     "grasp",
-    "signature", "eval_time_s", *POSE_METRIC_COLUMNS, "error",
+    "signature", "eval_time_s", *POSE_METRIC_COLUMNS, *ROBUST_COLUMNS, "error",
 )
 # Rows per cursor fetch, CSV chunk and Parquet row group: a chunk of rows with their parsed
 # JSON is ~5 KB a row in Python objects, so 5,000 rows keep an export near 25 MB.
@@ -51,7 +54,8 @@ _SELECTED = (
     PoseRow.yaw, PoseRow.outcome, PoseRow.viable, PoseRow.mu_s, PoseRow.effort_max_nm,
     PoseRow.effective_r, PoseRow.manifold_id, PoseRow.worker_id, PoseRow.inferred_from,
     PoseRow.signature, PoseRow.grasp, PoseRow.eval_time_s,
-    *(getattr(PoseRow, name) for name in POSE_METRIC_COLUMNS), PoseRow.error,
+    *(getattr(PoseRow, name) for name in POSE_METRIC_COLUMNS),
+    *(getattr(PoseRow, name) for name in ROBUST_COLUMNS), PoseRow.error,
 )
 # One encoder for every row: json.dumps(..., sort_keys=True) would build one per call.
 _to_json = json.JSONEncoder(sort_keys=True).encode
@@ -71,6 +75,7 @@ def _row(row: Any, labels: dict[int, str]) -> tuple[Any, ...]:
         _to_json(signature) if signature else "",
         row.eval_time_s,
         *(getattr(row, name) for name in POSE_METRIC_COLUMNS),
+        row.robust_s, row.robust_q, row.robust_label,
         row.error or "",
     )
 
@@ -113,7 +118,8 @@ def _schema() -> Any:
     types = {
         "viable": pa.bool_(), "effective_r": pa.float64(),
         **{c: pa.float64() for c in ("theta", "phi", "r", "roll", "pitch", "yaw", "mu_s",
-                                     "effort_max_nm", "eval_time_s", *POSE_METRIC_COLUMNS)},
+                                     "effort_max_nm", "eval_time_s", *POSE_METRIC_COLUMNS,
+                                     "robust_s", "robust_q")},
     }
     return pa.schema([(c, types.get(c, pa.string())) for c in COLUMNS])
 

@@ -48,6 +48,7 @@ def expected_csv(sessions: sessionmaker[Session], eid: int) -> bytes:
                 "signature": json.dumps(row.signature, sort_keys=True) if row.signature else "",
                 "eval_time_s": row.eval_time_s,
                 **{name: getattr(row, name) for name in POSE_METRIC_COLUMNS},
+                **{name: getattr(row, name) for name in export.ROBUST_COLUMNS},
                 "error": row.error or "",
             })
     return buf.getvalue().encode()
@@ -68,6 +69,8 @@ def test_exports_stream_in_chunks_with_the_same_content(
     assert whole.content == expected_csv(sessions, eid)
     n_rows = whole.content.count(b"\n") - 1
     assert n_rows > 20 and b",A," in whole.content  # labelled manifolds are in there
+    labels = {r["robust_label"] for r in csv.DictReader(io.StringIO(whole.text))}
+    assert labels and labels <= {"robust", "fragile", "futile", "uncertain"}
     one_group = pq.ParquetFile(io.BytesIO(
         client.get(f"/explorations/{eid}/export/poses.parquet").content))
     assert one_group.metadata.num_row_groups == 1

@@ -148,6 +148,9 @@ def test_acronym_round_trip(client: TestClient, explored: int,
                                                             for r in rows]
         assert np.array(f["grasps/qualities/mu_s"]).tolist() == [r.mu_s for r in rows]
         assert np.isnan(np.array(f["grasps/qualities/torque_margin_ratio"])).all()
+        for q in ("robust_s", "robust_q"):  # the robust map's, NaN where not computed
+            np.testing.assert_array_equal(f[f"grasps/qualities/{q}"], [
+                np.nan if getattr(r, q) is None else getattr(r, q) for r in rows])
         assert np.array(f["grasps/pose"]).tolist() == [
             [r.theta, r.phi, r.r, r.roll, r.pitch, r.yaw] for r in rows]
         assert np.array_equal(f["object/mesh/vertices"], mesh.vertices)
