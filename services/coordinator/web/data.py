@@ -118,6 +118,17 @@ class Choices(BaseModel):
     grasp_pictures: bool  # whether this coordinator can draw grasps (web/grasp.py)
 
 
+def _strategy_names() -> list[str]:
+    """The names the spec's strategy union accepts (new strategies appear by themselves)."""
+    import typing
+
+    from graspscape.shared.specs.exploration import StrategySpec
+
+    union = typing.get_args(StrategySpec)[0]
+    return [typing.get_args(m.model_fields["name"].annotation)[0]
+            for m in typing.get_args(union)]
+
+
 @router.get("/web/choices", response_model=Choices)
 def get_choices() -> Any:
     from graspscape.services.coordinator.web.grasp import has_painter
@@ -127,5 +138,5 @@ def get_choices() -> Any:
 
     return Choices(builtin_objects=list(BUILTIN_NAMES), grippers=list_grippers(),
                    policies=list(POLICY_NAMES),
-                   strategies=["adaptive", "grid", "random", "cmaes"],
+                   strategies=_strategy_names(),
                    grasp_pictures=has_painter())

@@ -332,6 +332,8 @@ async function viewSubmit() {
   const rolls = el("select", { name: "rolls", id: "rolls" }, ["1", "2", "4", "8"].map((n) => option(n)));
   const levels = el("select", { name: "levels", id: "levels" }, ["0", "1", "2", "3", "4", "5", "6"].map((n) => option(n)));
   levels.value = "1";
+  const robustness = el("select", { name: "robustness", id: "robustness" },
+    option("default", "torque margin of held poses (what /best ranks by)"), option("none", "none (faster)"));
   const label = el("input", { name: "label", id: "label", maxlength: 200 });
   const token = el("input", { type: "password", name: "token", id: "token", autocomplete: "off",
     placeholder: "only if the coordinator has one" });
@@ -339,7 +341,7 @@ async function viewSubmit() {
   const toggle = () => {
     objectName.closest("label").hidden = objectSel.value !== "__name";
     for (const n of [file, mass, units]) n.closest("label").hidden = objectSel.value !== "__file";
-    budget.closest("label").hidden = !["random", "cmaes"].includes(strategy.value);
+    budget.closest("label").hidden = !["random", "cmaes", "ppo"].includes(strategy.value);
   };
   objectSel.addEventListener("change", toggle);
   strategy.addEventListener("change", toggle);
@@ -362,12 +364,13 @@ async function viewSubmit() {
       }
       const obj = await getJSON("/objects", { method: "POST", body, headers });
       const strat = { name: strategy.value };
-      if (["random", "cmaes"].includes(strategy.value)) strat.poses = Number(budget.value);
+      if (["random", "cmaes", "ppo"].includes(strategy.value)) strat.poses = Number(budget.value);
       const spec = {
         object_id: obj.id, gripper: gripper.value,
         grid: { dtheta: Number(dtheta.value) * Math.PI / 180, r_min: Number(rMin.value),
           r_max: Number(rMax.value), dr: Number(dr.value), attitudes: { rolls: Number(rolls.value) } },
-        settings: { policy_name: policy.value },
+        settings: { policy_name: policy.value,
+          ...(robustness.value === "none" ? { robustness: { tests: [] } } : {}) },
         refinement: { levels: Number(levels.value) },
         strategy: strat,
       };
@@ -387,7 +390,8 @@ async function viewSubmit() {
       el("label", {}, "Object", objectSel), el("label", {}, "Name", objectName),
       el("label", {}, "Mesh file", file), el("label", {}, "Mass, kg", mass), el("label", {}, "Units", units)),
     el("fieldset", {}, el("legend", {}, "Gripper and policy"),
-      el("label", {}, "Gripper", gripper), el("label", {}, "Policy", policy)),
+      el("label", {}, "Gripper", gripper), el("label", {}, "Policy", policy),
+      el("label", {}, "Robustness tests", robustness)),
     el("fieldset", {}, el("legend", {}, "Pose grid and search"),
       el("label", {}, "Strategy", strategy), el("label", {}, "Pose budget", budget),
       el("label", {}, "Δθ between directions, °", dtheta),
