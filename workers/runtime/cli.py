@@ -27,6 +27,7 @@ def _worker(args: argparse.Namespace) -> int:
         "name": args.name,
         "cache_dir": args.cache_dir,
         "instant": args.instant or None,
+        "instant_pose_s": args.instant_pose_s,
         "tiles_per_request": args.tiles_per_request,
     }
     config = WorkerConfig(**{k: v for k, v in options.items() if v is not None})
@@ -50,6 +51,8 @@ def register_worker(subparsers: argparse._SubParsersAction) -> None:
                         help="object cache (default: GRASPSCAPE_CACHE_DIR or ~/.cache/graspscape)")
     worker.add_argument("--instant", action="store_true",
                         help="benchmarks only: answer every pose at once without physics")
+    worker.add_argument("--instant-pose-s", type=float, metavar="SECONDS",
+                        help="with --instant: seconds each pose takes (a sleep; fault tests)")
     worker.add_argument("--tiles-per-request", type=int,
                         help="tiles a process asks for at once (default 1; more only for "
                         "very short tiles, as with --instant)")

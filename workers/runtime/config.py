@@ -36,6 +36,9 @@ class WorkerConfig(BaseModel):
     # No physics: answer every pose at once with a fixed result. Measures the coordinator's
     # dispatch + ingest ceiling through the real protocol; never for real explorations.
     instant: bool = False
+    # With `instant`: seconds each made-up pose takes (a sleep, no CPU), so fault tests can
+    # cut a link or kill a process in the middle of a tile without paying for physics.
+    instant_pose_s: float = Field(default=0.0, ge=0, le=60)
     tiles_per_request: int = Field(default=1, ge=1, le=64)
     query_timeout_s: float = Field(default=10.0, gt=0)
     backoff_min_s: float = Field(default=0.2, gt=0)

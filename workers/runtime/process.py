@@ -248,6 +248,8 @@ class WorkerProcess:
 
     def _evaluate(self, tile: TileLease, obj, pose, donors=None) -> PoseResult:
         if self.config.instant:
+            if self.config.instant_pose_s:
+                self.stop.wait(self.config.instant_pose_s)
             return instant_result(pose)
         from graspscape.workers.sim.evaluate import evaluate_pose
 
