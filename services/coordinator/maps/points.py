@@ -1,4 +1,5 @@
-"""The poses a map picture draws, as arrays: lattice indices, r, μs, viability, manifold label.
+"""The poses a map picture draws, as arrays: lattice indices, r, μs, viability, manifold label
+and robust label (manifolds/robust.py, as a small integer: ROBUST_CODES).
 
 A picture needs of each stored pose only where it is on the lattice, its r and μs, whether it
 held and its manifold label — not its grasp or signature. Read from the store (the stored
@@ -19,7 +20,7 @@ import numpy as np
 from graspscape.services.coordinator.exploration.lattice import TWO_PI, Lattice, Point
 from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
 from graspscape.shared.specs.pose import _KEY_DIGITS
-from sqlalchemy import Select, func, select
+from sqlalchemy import Select, case, func, select
 from sqlalchemy.orm import Session
 
 CHUNK = 50_000  # rows per cursor fetch
@@ -38,13 +39,14 @@ class MapPoints:
     mu_s: np.ndarray
     viable: np.ndarray
     label: np.ndarray  # manifold label, -1 for none
+    robust: np.ndarray | None = None  # ROBUST_CODES of the stored robust label, -1 for none
 
     def __len__(self) -> int:
         return len(self.ring)
 
     def take(self, which: np.ndarray | slice) -> MapPoints:
         """The points a mask, an index array or a slice selects."""
-        return MapPoints(*(getattr(self, f)[which] for f in _FIELDS))
+        return MapPoints(*(_pick(getattr(self, f), which) for f in _FIELDS))
 
     def directions(self, lattice: Lattice) -> np.ndarray:
         """Unit direction of every point, as `Lattice.direction` computes it (once per
@@ -58,7 +60,13 @@ class MapPoints:
         return dirs[inverse.ravel()]
 
 
-_FIELDS = ("ring", "azimuth", "r_index", "attitude", "r", "mu_s", "viable", "label")
+_FIELDS = ("ring", "azimuth", "r_index", "attitude", "r", "mu_s", "viable", "label", "robust")
+# The robust labels as the pictures code them (-1: not computed yet).
+ROBUST_CODES = {"robust": 0, "uncertain": 1, "fragile": 2, "futile": 3}
+
+
+def _pick(values: np.ndarray | None, which: np.ndarray | slice) -> np.ndarray | None:
+    return None if values is None else values[which]
 
 
 def _lattice_indices(lattice: Lattice, cols: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -118,6 +126,8 @@ def stored_points(session: Session, exploration_id: int, lattice: Lattice) -> Ma
     query = select(
         PoseRow.theta, PoseRow.phi, PoseRow.r, PoseRow.roll, PoseRow.pitch, PoseRow.yaw,
         PoseRow.mu_s, PoseRow.viable, func.coalesce(PoseRow.manifold_id, 0),
+        case(*((PoseRow.robust_label == name, code) for name, code in ROBUST_CODES.items()),
+             else_=-1),
     ).where(PoseRow.exploration_id == int(exploration_id))
     parts: list[MapPoints] = []
     ids = np.array([0, *label_of_id], dtype=np.int64)  # 0: no manifold
@@ -128,11 +138,11 @@ def stored_points(session: Session, exploration_id: int, lattice: Lattice) -> Ma
         K, J, I, att, on = _lattice_indices(lattice, arr[:, :6])  # noqa: E741
         label = labels[np.searchsorted(ids, arr[:, 8].astype(np.int64))]
         parts.append(MapPoints(K[on], J[on], I[on], att[on], arr[on, 2], arr[on, 6],
-                               arr[on, 7] != 0, label[on]))
+                               arr[on, 7] != 0, label[on], arr[on, 9].astype(np.int64)))
     if not parts:
         empty = np.zeros(0, dtype=np.int64)
         return MapPoints(empty, empty, empty, empty, np.zeros(0), np.zeros(0),
-                         np.zeros(0, dtype=bool), empty)
+                         np.zeros(0, dtype=bool), empty, empty)
     whole = MapPoints(*(np.concatenate([getattr(p, f) for p in parts]) for f in _FIELDS))
     order = np.lexsort((whole.attitude, whole.r_index, whole.azimuth, whole.ring))
     return whole.take(order)

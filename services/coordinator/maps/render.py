@@ -7,7 +7,12 @@ r = d − ρ_surface(u). A pixel with r in [r_min, r_max] takes the label of the
 pose of the chosen attitude (in direction and r) and a μs interpolated (inverse distance)
 among the nearby known poses of that label. Drawn like the paper's Fig. 2: manifolds coloured
 and lettered, the non-viable area hatched, μs level sets inside manifolds, local maxima as
-yellow dots (those within one coarse step of the plane), the object's outline in the plane.
+yellow dots, the object's outline in the plane. The robust map marks where the picture can be
+trusted: a pixel takes the robust label of its nearest known pose (manifolds/robust.py), and
+fragile pixels are stippled, uncertain ones washed grey. A local maximum is drawn only where it
+lies in the cut (`maxima_in_cut`): of the cut's attitude, its direction within half a finest
+step of the plane, placed where the cut draws that direction and r (so never inside the
+object's outline or a handle's hole), and only on a pixel of its own manifold.
 The 3D view shows the viable reference-point positions coloured by manifold (thinned beyond
 SCATTER_MAX markers). The poses come as arrays (`maps.points`) with their stored labels.
 """
@@ -30,7 +35,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
     surface_radii,
 )
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
-from graspscape.services.coordinator.maps.points import MapPoints
+from graspscape.services.coordinator.maps.points import ROBUST_CODES, MapPoints
 from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
 from scipy.spatial import cKDTree
@@ -82,6 +87,7 @@ def cut_field(
     dirs = (np.outer(np.cos(ang.ravel()), e1) + np.outer(np.sin(ang.ravel()), e2))
     labels = np.full(X.shape, np.nan)
     mu = np.full(X.shape, np.nan)
+    robust = np.full(X.shape, -1, dtype=np.int64)
     known = points.take(points.attitude == attitude)
     if len(known) and inside.any():
         tree = cKDTree(_embed(known.directions(lattice), known.r, lattice))
@@ -97,8 +103,54 @@ def cut_field(
         m = (w * kmu[nn]).sum(axis=1) / w.sum(axis=1)
         labels.ravel()[idx] = first
         mu.ravel()[idx] = np.where(first >= 0, m, np.nan)
+        if known.robust is not None:
+            robust.ravel()[idx] = known.robust[nn[:, 0]]
     return {"X": X, "Y": Y, "labels": labels, "mu": mu, "extent": extent, "e1": e1, "e2": e2,
-            "inside": inside}
+            "inside": inside, "robust": robust, "psi": psi, "rho_ring": rho_ring,
+            "attitude": attitude}
+
+
+def maxima_in_cut(field: dict[str, Any], manifolds: list[ManifoldSummary],
+                  lattice: Lattice) -> list[tuple[float, float, int]]:
+    """(x, y, label) in the plane of the local maxima that lie in the cut: of the cut's
+    attitude, direction within half a finest angular step of the plane (the plane passes
+    through its cell), drawn at the in-plane direction and r as the cut draws them — the
+    surface radius there is the outermost along that direction in the plane, so the dot is
+    outside the object's outline and any hole of it — and kept only on a pixel of its own
+    manifold inside the explored shell."""
+    X, labels, inside = field["X"], field["labels"], field["inside"]
+    e1, e2 = field["e1"], field["e2"]
+    normal = np.cross(e1, e2)
+    band = lattice.dtheta(lattice.depth) / 2 + 1e-9
+    roll0, pitch0, yaw0 = lattice.attitudes[field["attitude"]]
+    psi, rho_ring = field["psi"], field["rho_ring"]
+    xs = X[0]
+    step = float(xs[1] - xs[0]) if len(xs) > 1 else 1.0
+    out = []
+    for m in manifolds:
+        for pm in m.local_maxima:
+            if (abs(math.remainder(pm.roll - roll0, 2 * math.pi)) > 1e-6
+                    or abs(pm.pitch - pitch0) > 1e-6 or abs(pm.yaw - yaw0) > 1e-6):
+                continue
+            u = np.array([math.sin(pm.theta) * math.cos(pm.phi),
+                          math.sin(pm.theta) * math.sin(pm.phi), math.cos(pm.theta)])
+            if abs(math.asin(max(-1.0, min(1.0, float(u @ normal))))) > band:
+                continue
+            a, b = float(u @ e1), float(u @ e2)
+            if math.hypot(a, b) < 1e-12:
+                continue
+            ang = math.atan2(b, a) % (2 * math.pi)
+            rho = float(np.interp(ang, np.append(psi, 2 * math.pi),
+                                  np.append(rho_ring, rho_ring[0])))
+            d = rho + pm.r
+            x, y = d * math.cos(ang), d * math.sin(ang)
+            j = round(float(x - xs[0]) / step)
+            i = round(float(y - xs[0]) / step)
+            if not (0 <= i < X.shape[0] and 0 <= j < X.shape[1]):
+                continue
+            if inside[i, j] and labels[i, j] == m.label:
+                out.append((x, y, m.label))
+    return out
 
 
 def _section(mesh: Any | None, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
@@ -135,6 +187,17 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
             cs = ax.contour(X, Y, np.ma.masked_invalid(mu), levels=levels, colors="k",
                             linewidths=0.6)
             ax.clabel(cs, fmt="%.2f", fontsize=6)
+    robust = field.get("robust")
+    if robust is not None:
+        shell = np.isfinite(labels)
+        uncertain = np.where(shell & (robust == ROBUST_CODES["uncertain"]), 1.0, np.nan)
+        fragile = np.where(shell & (robust == ROBUST_CODES["fragile"]), 1.0, np.nan)
+        if np.isfinite(uncertain).any():
+            ax.contourf(X, Y, np.ma.masked_invalid(uncertain), levels=[0.5, 1.5],
+                        colors=["0.55"], alpha=0.45, zorder=2)
+        if np.isfinite(fragile).any():
+            ax.contourf(X, Y, np.ma.masked_invalid(fragile), levels=[0.5, 1.5],
+                        colors="none", hatches=[".."], zorder=2)
     outline = _section(mesh, e1, e2)
     if len(outline):
         ax.add_collection(LineCollection(outline, colors="0.2", linewidths=1.6, zorder=4))
@@ -146,18 +209,8 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
             k = int(np.argmin((xs_ - xs_.mean()) ** 2 + (ys_ - ys_.mean()) ** 2))
             ax.text(float(xs_[k]), float(ys_[k]), f"${label_name(label)}$",
                     fontsize=13, ha="center", va="center", zorder=5, weight="bold")
-    normal = np.cross(e1, e2)
-    band = lattice.dtheta(0)
-    for m in manifolds:
-        for pm in m.local_maxima:
-            u = np.array([math.sin(pm.theta) * math.cos(pm.phi),
-                          math.sin(pm.theta) * math.sin(pm.phi), math.cos(pm.theta)])
-            if abs(math.asin(max(-1.0, min(1.0, float(u @ normal))))) > band:
-                continue
-            rho = float(surface_radii(mesh, u[None, :], FALLBACK_RADIUS)[0])
-            pos = (rho + pm.r) * u
-            ax.plot(pos @ e1, pos @ e2, "o", color="yellow", markeredgecolor="k",
-                    markersize=6, zorder=6)
+    for x, y, _ in maxima_in_cut(field, manifolds, lattice):
+        ax.plot(x, y, "o", color="yellow", markeredgecolor="k", markersize=6, zorder=6)
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("m")

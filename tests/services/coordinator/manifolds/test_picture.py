@@ -10,7 +10,7 @@ import random
 import numpy as np
 import pytest
 from graspscape.services.coordinator.errors import InvalidInput
-from graspscape.services.coordinator.exploration.lattice import Lattice
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.samples import point_or_none
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import create_exploration
@@ -112,3 +112,86 @@ def test_a_picture_is_kept_per_map_version_and_checks_its_attitude(sessions,
         assert picture_bytes(s, eid, "png", attitude=1)[0] != first
         with pytest.raises(InvalidInput):
             picture_bytes(s, eid, "png", attitude=2)
+
+
+def _ring_map():  # type: ignore[no-untyped-def]
+    """A flat ring (hole at the centre of mass) and a map of one manifold over a 30° grid
+    refined once, every point known: robust, except uncertain and fragile bands."""
+    import trimesh
+    from graspscape.services.coordinator.manifolds.summary import ManifoldSummary, PoseBrief
+    from graspscape.services.coordinator.maps.points import ROBUST_CODES
+
+    mesh = trimesh.creation.annulus(r_min=0.02, r_max=0.05, height=0.03)
+    lattice = Lattice(PoseGridSpec(dtheta=math.radians(30), r_min=0.0, r_max=0.02, dr=0.01), 1)
+    pts = sorted(
+        (K, J, i, 0) for K, J in lattice.cells(1) for i in range((lattice.n_r << 1) + 1))
+    ring, az, ri, att = (np.array(c) for c in zip(*pts, strict=True))
+    n = len(pts)
+    phi = np.array([lattice.pose(Point(*p)).phi for p in pts])
+    robust = np.where(phi < 1.0, ROBUST_CODES["uncertain"],
+                      np.where(phi > 5.0, ROBUST_CODES["fragile"], ROBUST_CODES["robust"]))
+    points = MapPoints(ring, az, ri, att, ri * lattice.dr(1), np.full(n, 0.5),
+                       np.ones(n, dtype=bool), np.zeros(n, dtype=np.int64), robust)
+    # A local maximum at every direction, r = 0: in the plane and off it by up to 60°.
+    maxima = [PoseBrief(key=str(k), theta=lattice.theta(K), phi=lattice.pose(Point(K, J, 0, 0)).phi,
+                        r=0.0, roll=0.0, pitch=0.0, yaw=0.0, mu_s=0.5, effort_max_nm=1.0)
+              for k, (K, J) in enumerate(lattice.cells(1))]
+    summary = ManifoldSummary(
+        label=0, name="A", description="", digits=[], pose_count=n, evaluated_count=n,
+        volume_cm3=1.0, mu_s_min=0.5, mu_s_mean=0.5, mu_s_max=0.5, mu_s_std=0.0,
+        best=maxima[0], local_maxima=maxima)
+    return mesh, lattice, points, summary
+
+
+def test_local_maxima_are_drawn_only_where_they_lie_in_the_cut() -> None:
+    mesh, lattice, points, summary = _ring_map()
+    field = render.cut_field(lattice, points, mesh, pixels=120)
+    dots = render.maxima_in_cut(field, [summary], lattice)
+    # Only the equator's maxima (the plane z = 0 passes through their cells), each once.
+    on_plane = [m for m in summary.local_maxima if abs(m.theta - math.pi / 2) < 1e-9]
+    assert len(dots) == len(on_plane) > 8
+    for x, y, label in dots:
+        assert label == 0
+        # On the ring's outer wall or beyond, never inside its outline or its hole.
+        assert math.hypot(x, y) >= 0.05 - 1e-3
+        assert not mesh.contains([[x, y, 0.0]])[0]
+    # Placed as before (the 3D position projected, within one coarse step of the plane), the
+    # maxima 30° off the plane land on the ring's top face, inside its outline.
+    normal = np.array([0.0, 0.0, 1.0])
+    old_inside = 0
+    for m in summary.local_maxima:
+        u = np.array([math.sin(m.theta) * math.cos(m.phi), math.sin(m.theta) * math.sin(m.phi),
+                      math.cos(m.theta)])
+        if 0 < abs(math.asin(float(u @ normal))) <= lattice.dtheta(0):
+            rho = float(render.surface_radii(mesh, u[None, :], 0.05)[0])
+            pos = (rho + m.r) * u
+            old_inside += bool(mesh.contains([[pos[0], pos[1], 0.0]])[0])
+    assert old_inside > 0
+    # Another attitude's maxima are not this cut's.
+    rolled = summary.model_copy(update={"local_maxima": [
+        m.model_copy(update={"roll": 1.0}) for m in summary.local_maxima]})
+    assert render.maxima_in_cut(field, [rolled], lattice) == []
+
+
+def test_the_cut_carries_the_robust_labels_and_shades_them() -> None:
+    from graspscape.services.coordinator.maps.points import ROBUST_CODES
+
+    mesh, lattice, points, summary = _ring_map()
+    field = render.cut_field(lattice, points, mesh, pixels=80)
+    shell = np.isfinite(field["labels"])
+    codes = set(np.unique(field["robust"][shell]).tolist())
+    assert codes == {ROBUST_CODES["robust"], ROBUST_CODES["uncertain"], ROBUST_CODES["fragile"]}
+    assert (field["robust"][~shell] == -1).all()
+    # Drawn: a grey wash over the uncertain pixels and a stipple over the fragile ones.
+    import matplotlib.pyplot as plt
+
+    def drawn(f: dict) -> list:  # type: ignore[type-arg]
+        fig, ax = plt.subplots()
+        render._draw_cut(ax, f, [summary], lattice, None, "")
+        out = [c for c in ax.collections if c.get_zorder() == 2]
+        plt.close(fig)
+        return out
+
+    shades = drawn(field)
+    assert len(shades) == 2 and [list(c.hatches) for c in shades] == [[None], [".."]]
+    assert drawn({**field, "robust": np.zeros_like(field["robust"])}) == []
