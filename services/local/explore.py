@@ -2,8 +2,9 @@
 
 Runs the coordinator's store (SQLite under the data folder) and dispatch in this process and
 N local worker processes that connect to it over loopback zenoh, exactly as remote workers
-would; shows a progress bar and prints where the results are, and last the outcome (done,
-incomplete or failed, with the reasons of failed tiles), which the exit status follows.
+would; shows a progress bar and prints where the results are, the robust best grasp of each
+large manifold with its certification evidence, and last the outcome (done, incomplete or
+failed, with the reasons of failed tiles), which the exit status follows.
 Running the same command again resumes an unfinished exploration of the same spec instead of
 starting over; one that ended incomplete or failed has its failed tiles queued again.
 """
@@ -20,6 +21,11 @@ from pathlib import Path
 
 from graspscape.services.coordinator.dispatch.leases import requeue_lost
 from graspscape.services.coordinator.dispatch.service import Dispatcher
+from graspscape.services.coordinator.exploration.certify_store import (
+    RobustSummary,
+    format_best,
+    robust_summary,
+)
 from graspscape.services.coordinator.exploration.object_symmetry import resolve_grid
 from graspscape.services.coordinator.exploration.service import (
     create_exploration,
@@ -127,6 +133,17 @@ def outcome_line(session: Session, exploration_id: int, stored: int, elapsed_s: 
         line += (f"; {failures.poses_with_errors} poses raised in simulation (stored with "
                  "outcome error and the message)")
     return line
+
+
+def robust_lines(robust: RobustSummary) -> str:
+    """The robust best grasp of each large manifold (docs/exploration.md, "Certification"):
+    volume and robust core, s_δ and q_δ, the pose, and what backs the claim."""
+    lines = ["robust best grasp per large manifold (≥ 1 % of the viable volume):"]
+    lines += [format_best(b) for b in robust.bests]
+    if robust.dust_count:
+        lines.append(f"  dust: {robust.dust_count} smaller manifolds, "
+                     f"{robust.dust_volume_cm3:.1f} cm³ in all")
+    return "\n".join(lines)
 
 
 def _short(text: str, limit: int = 200) -> str:
@@ -258,8 +275,10 @@ def run_explore(opts: ExploreOptions) -> int:
         map_path = data_dir / f"exploration-{exploration_id}-map.png"
         table_path = data_dir / f"exploration-{exploration_id}-manifolds.json"
         manifolds = None
+        robust = None
         if n and not interrupted:
             manifolds, _ = write_map_files(session, exploration_id, map_path, table_path)
+            robust = robust_summary(session, exploration_id)
         outcome = (f"interrupted: {n} poses stored in {elapsed:.0f} s; run the same command "
                    "again to resume" if interrupted
                    else outcome_line(session, exploration_id, n, elapsed))
@@ -270,6 +289,8 @@ def run_explore(opts: ExploreOptions) -> int:
     print(f"results: {csv_path}")
     if manifolds is not None:
         print(f"map: {map_path} ({manifolds} behavioral manifolds; table: {table_path})")
+    if robust is not None and robust.bests:
+        print(robust_lines(robust))
     print(f"database: {data_dir / 'coordinator.db'} (exploration {exploration_id}); browse with "
           f"`graspscape serve --data-dir {data_dir}` and GET "
           f"/explorations/{exploration_id}/poses")

@@ -30,16 +30,16 @@ import math
 import random
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Protocol
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.robust import (
     ROBUST_MIN,
     RobustLabel,
-    large_manifolds,
+    RobustScore,
     neighbourhood,
 )
+from graspscape.services.coordinator.manifolds.summary import robust_order
 from graspscape.shared.specs.exploration import CertificationSpec
 from graspscape.shared.specs.pose import Pose
 
@@ -64,21 +64,12 @@ def centre_id_of(reason: str | None) -> int | None:
     return int(tail) if tail.isdigit() else None
 
 
-class Score(Protocol):
-    """What certification reads of a robust score (manifolds/robust.RobustScore)."""
-
-    s: float
-    q: float
-    label: RobustLabel
-
-
 @dataclass(frozen=True)
 class Manifold:
-    """One manifold as certification sees it: its label, viable members and volume."""
+    """One large manifold as certification sees it: its label and viable members."""
 
     label: int
     members: tuple[Point, ...]
-    volume: float
 
 
 @dataclass(frozen=True)
@@ -93,12 +84,13 @@ class Work:
 
 
 def robust_best(members: Iterable[Point], samples: Mapping[Point, StoredPose],
-                scores: Mapping[Point, Score]) -> Point | None:
-    """The member with the highest q_δ (ties: higher s_δ, then the smaller pose key)."""
+                scores: Mapping[Point, RobustScore]) -> Point | None:
+    """The manifold's robust best as the map and /best rank it (manifolds/summary.py
+    `robust_order`: robust before uncertain, fragile, futile; then by q_δ, μs, key)."""
     scored = [p for p in members if p in scores and samples[p].viable]
     if not scored:
         return None
-    return min(scored, key=lambda p: (-scores[p].q, -scores[p].s, samples[p].key))
+    return min(scored, key=lambda p: robust_order(samples[p], scores[p]))
 
 
 def point_best(members: Iterable[Point], samples: Mapping[Point, StoredPose], top: int
@@ -159,19 +151,11 @@ def budgets(spec: CertificationSpec, other_planned: int, n_large: int) -> tuple[
     return total, (total // n_large if n_large else 0)
 
 
-def large(manifolds: Sequence[Manifold]) -> list[Manifold]:
-    """The large manifolds (manifolds/robust.large_manifolds; the rest is dust)."""
-    total = sum(m.volume for m in manifolds)
-    if total <= 0:
-        return []
-    return [manifolds[i] for i in large_manifolds([m.volume for m in manifolds], total)]
-
-
 def plan(
     lattice: Lattice,
     samples: Mapping[Point, StoredPose],
     manifolds: Sequence[Manifold],
-    scores: Mapping[Point, Score],
+    scores: Mapping[Point, RobustScore],
     spec: CertificationSpec,
     *,
     per_manifold: int,
@@ -181,7 +165,8 @@ def plan(
     taken: set[str],
     radius_m: Callable[[Point], float],
 ) -> list[Work]:
-    """One certification round over the large `manifolds` (label order).
+    """One certification round over the large `manifolds` (label order; the map's `large`
+    flag: ≥ 1 % of the viable volume, manifolds/robust.large_manifolds).
 
     `per_manifold`: what one manifold's certification may cost in all (`budgets`);
     `budget_left`: what the whole certification may still cost; `spent`: what each
@@ -241,7 +226,7 @@ class Evidence:
 
 
 def evidence(lattice: Lattice, samples: Mapping[Point, StoredPose], p: Point,
-             score: Score | None, shaken: Sequence[StoredPose], *, jitters_asked: bool
+             score: RobustScore | None, shaken: Sequence[StoredPose], *, jitters_asked: bool
              ) -> Evidence:
     centre = samples.get(p)
     members = neighbourhood(lattice, p)

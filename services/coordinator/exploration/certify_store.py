@@ -106,14 +106,11 @@ def mark_certifies(session: Session, exploration_id: int, keys: Sequence[str]) -
     return len(updates)
 
 
-def _radius(computed: ComputedMap) -> dict[Point, float]:
-    """Surface radius along each sample's direction (for the jitters' position error)."""
-    points = sorted(computed.samples)
-    if not points:
-        return {}
-    dirs = np.array([computed.lattice.direction(p) for p in points])
-    radii = surface_radii(computed.mesh, dirs, FALLBACK_RADIUS)
-    return {p: float(r) for p, r in zip(points, radii, strict=True)}
+def _radius(computed: ComputedMap, p: Point) -> float:
+    """Surface radius along p's direction (for the jitters' position error): one ray, asked
+    only for the centres that get jitters."""
+    direction = np.array([computed.lattice.direction(p)])
+    return float(surface_radii(computed.mesh, direction, FALLBACK_RADIUS)[0])
 
 
 def certification_round(session: Session, exploration_id: int, spec: ExplorationSpec,
@@ -127,10 +124,8 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
     members: dict[int, list[Point]] = {}
     for p, label in computed.label_of.items():
         members.setdefault(label, []).append(p)
-    manifolds = certify.large([
-        certify.Manifold(m.label, tuple(sorted(members.get(m.label, []))), m.volume_cm3)
-        for m in computed.map.manifolds
-    ])
+    manifolds = [certify.Manifold(m.label, tuple(sorted(members.get(m.label, []))))
+                 for m in computed.map.manifolds if m.large]
     plans = certification_plans(session, exploration_id)
     row = session.get(ExplorationRow, exploration_id)
     other = (row.poses_total if row is not None else 0) - len(plans)
@@ -153,11 +148,10 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
     scores = robust_scores(lattice, samples, [p for m in manifolds for p in m.members])
     taken = set(point_of) | set(session.scalars(select(PosePlanRow.pose_key).where(
         PosePlanRow.exploration_id == exploration_id)))
-    radius = _radius(computed)
     work = certify.plan(
         lattice, samples, manifolds, scores, cert, per_manifold=per_manifold,
         budget_left=total - len(plans), spent=spent, jittered=jittered, taken=taken,
-        radius_m=lambda p: radius.get(p, FALLBACK_RADIUS))
+        radius_m=lambda p: _radius(computed, p))
     if orbits is not None:
         # A member is evaluated as its orbit's representative, mirrored onto it on arrival.
         work = [w if w.point is None else certify.Work(
@@ -220,14 +214,33 @@ def jitter_samples(session: Session, exploration_id: int, centres: Sequence[str]
     return out
 
 
+class RobustSummary(BaseModel):
+    """The large manifolds' robust best grasps, and the rest of the map as one line."""
+
+    bests: list[CertifiedBest]
+    dust_count: int = Field(description="manifolds under 1 % of the viable volume")
+    dust_volume_cm3: float
+
+
+def robust_summary(session: Session, exploration_id: int) -> RobustSummary:
+    bests, dust_count, dust_volume = _bests(session, exploration_id)
+    return RobustSummary(bests=bests, dust_count=dust_count, dust_volume_cm3=dust_volume)
+
+
 def certified_bests(session: Session, exploration_id: int,
                     samples: Mapping[Point, StoredPose] | None = None) -> list[CertifiedBest]:
     """The robust best grasp of every large manifold of the stored manifold table, largest
     first, with its certification evidence (the manifold table must be current:
     manifolds.service.ensure_manifolds)."""
+    return _bests(session, exploration_id, samples)[0]
+
+
+def _bests(session: Session, exploration_id: int,
+           samples: Mapping[Point, StoredPose] | None = None
+           ) -> tuple[list[CertifiedBest], int, float]:
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
-        return []
+        return [], 0, 0.0
     spec = spec_of(row)
     lattice: Lattice = lattice_of(spec)
     samples = samples if samples is not None else load_samples(session, exploration_id, lattice)
@@ -240,9 +253,11 @@ def certified_bests(session: Session, exploration_id: int,
         if key in point_of:
             members.setdefault(mid, []).append(point_of[key])
     volume = {r.id: float((r.summary or {}).get("volume_cm3", 0.0)) for r in rows}
-    chosen = certify.large([certify.Manifold(r.id, tuple(sorted(members.get(r.id, []))),
-                                             volume[r.id]) for r in rows])
+    chosen = [certify.Manifold(r.id, tuple(sorted(members.get(r.id, [])))) for r in rows
+              if r.large]
     viable_volume = sum(volume.values())
+    large_ids = {m.label for m in chosen}
+    dust = [v for mid, v in volume.items() if mid not in large_ids]
     scores = robust_scores(lattice, samples, [p for m in chosen for p in m.members])
     by_id = {r.id: r for r in rows}
     best: dict[int, Point] = {}
@@ -267,15 +282,15 @@ def certified_bests(session: Session, exploration_id: int,
         mrow = by_id[m.label]
         core = mrow.core_volume_cm3
         out.append(CertifiedBest(
-            label=(mrow.summary or {}).get("name", str(mrow.label)), volume_cm3=m.volume,
-            volume_share=m.volume / viable_volume if viable_volume else 0.0,
+            label=(mrow.summary or {}).get("name", str(mrow.label)), volume_cm3=volume[m.label],
+            volume_share=volume[m.label] / viable_volume if viable_volume else 0.0,
             core_volume_cm3=None if core is None else float(core),
             pose=Pose(theta=s.theta, phi=s.phi, r=s.r, roll=s.roll, pitch=s.pitch, yaw=s.yaw),
             key=s.key, s=None if score is None else score.s,
             q=None if score is None else score.q, mu_s=s.mu_s, robust_label=ev.label,
             neighbours=ev.neighbours, known=ev.known, held=ev.held, jitters=ev.jitters,
             jitters_held=ev.jitters_held, certified=ev.certified))
-    return out
+    return out, len(dust), sum(dust)
 
 
 def format_best(b: CertifiedBest) -> str:
@@ -283,9 +298,19 @@ def format_best(b: CertifiedBest) -> str:
     core = "?" if b.core_volume_cm3 is None else f"{b.core_volume_cm3:.1f}"
     s = "?" if b.s is None else f"{b.s:.2f}"
     q = "?" if b.q is None else f"{b.q:.3f}"
-    claim = "certified robust" if b.certified else f"not certified ({b.robust_label})"
+    claim = "certified robust" if b.certified else f"not certified: {_why_not(b)}"
     return (f"  {b.label}: {b.volume_cm3:.1f} cm³ ({100 * b.volume_share:.0f} %), core {core} "
             f"cm³; s {s}, q {q}, μs {b.mu_s:.3f} at θ {math.degrees(b.pose.theta):.1f}° "
             f"φ {math.degrees(b.pose.phi):.1f}° r {1000 * b.pose.r:.1f} mm roll "
             f"{math.degrees(b.pose.roll):.0f}°; N_δ {b.known}/{b.neighbours} known, "
             f"{b.held} held; jitters {b.jitters_held}/{b.jitters} held; {claim}")
+
+
+def _why_not(b: CertifiedBest) -> str:
+    if b.known < b.neighbours:
+        return f"{b.neighbours - b.known} of N_δ not evaluated"
+    if b.robust_label != "robust":
+        return str(b.robust_label)
+    if not b.jitters:
+        return "no jitters evaluated"
+    return "jitters dropped"

@@ -17,13 +17,24 @@ from graspscape.services.coordinator.exploration.certify_store import (
     certification_plans,
     certified_bests,
     pose_of_key,
+    robust_summary,
 )
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.robust import neighbourhood, robust_scores
+from graspscape.services.coordinator.manifolds.robust import (
+    RobustLabel,
+    neighbourhood,
+    robust_scores,
+)
+from graspscape.services.coordinator.manifolds.service import (
+    Rank,
+    best_poses,
+    robust_evidence,
+)
 from graspscape.services.coordinator.objects.service import create_named
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
+from graspscape.services.local.explore import robust_lines
 from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import (
     CertificationSpec,
@@ -79,7 +90,7 @@ def _held(p: Point, mu: float = 0.5) -> StoredPose:
 
 def test_plan_completes_the_robust_best_first_then_jitters_it_within_budget() -> None:
     samples = {LONE: _held(LONE, 0.9)}
-    manifolds = [certify.Manifold(0, (LONE,), 1.0)]
+    manifolds = [certify.Manifold(0, (LONE,))]
     hood = neighbourhood(LATTICE, LONE)
 
     def plan(budget: int, jittered: set[Point] = frozenset()) -> list[certify.Work]:
@@ -181,6 +192,10 @@ def test_a_lone_held_pose_is_never_claimed_robust(sqlite_sessions) -> None:
         jitters = list(s.scalars(select(PoseRow).where(PoseRow.exploration_id == eid,
                                                        PoseRow.certifies == lone_key)))
         budget = exploration_budget(s, eid)
+        # /best's ranking (rank=robust, the default): its top pose is not labelled robust.
+        top = best_poses(s, eid, rank=Rank.ROBUST, limit=10)
+        top_evidence = robust_evidence(s, eid, top)
+        printed = robust_lines(robust_summary(s, eid))
     # It is the only grasp, so the only (large) manifold's best: certification completed its
     # neighbourhood and jittered it, and every neighbour and jitter dropped.
     assert [b.key for b in bests] == [lone_key]
@@ -190,6 +205,12 @@ def test_a_lone_held_pose_is_never_claimed_robust(sqlite_sessions) -> None:
     assert len(jitters) == CERT.jitters and not any(j.viable for j in jitters)
     assert (best.jitters, best.jitters_held) == (CERT.jitters, 0)
     assert best.robust_label != "robust" and not best.certified
+    assert [r.pose_key for r in top] == [lone_key]  # the jitters all dropped
+    assert top_evidence[0].score.label != RobustLabel.ROBUST
+    assert (top_evidence[0].certifying, top_evidence[0].certifying_held) == (CERT.jitters, 0)
+    # `graspscape explore` prints it so.
+    assert "A: " in printed and f"N_δ {best.known}/{best.known} known, 0 held; jitters " \
+        f"0/{CERT.jitters} held; not certified: {best.robust_label}" in printed
     # Border refinement had evaluated its neighbours already (they all differ from it): the
     # certification's own evaluations are the jitters, and the budget counts them.
     plan = _plan_of(sessions, eid)
@@ -199,7 +220,7 @@ def test_a_lone_held_pose_is_never_claimed_robust(sqlite_sessions) -> None:
 
 @pytest.mark.slow  # two whole explorations per database
 def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
-        sessions) -> None:
+        client, sessions) -> None:
     object_id = _sphere(sessions)
     # No local search: certification follows refinement, which leaves the inside alone.
     eid = _explore(sessions, object_id, _cap, search_rounds=0)
@@ -211,6 +232,11 @@ def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
     assert best.certified and best.robust_label == "robust"
     assert best.known == best.neighbours == best.held
     assert best.jitters == best.jitters_held == CERT.jitters
+    # GET /best (rank=robust by default) answers the same grasp, with the same evidence.
+    answer = client.get(f"/explorations/{eid}/best").json()["poses"][0]
+    assert (answer["pose_key"], answer["robust_label"]) == (best.key, "robust")
+    assert answer["evidence"]["certifying"] == answer["evidence"]["certifying_held"] == \
+        CERT.jitters
     # Certification completed N_δ itself (refinement evaluated nothing inside the region).
     plan = _plan_of(sessions, eid)
     members = {LATTICE.pose(q).key() for q in neighbourhood(LATTICE, _point(best.key))}
