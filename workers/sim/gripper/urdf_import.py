@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -206,14 +207,26 @@ def _limits(joint: ET.Element, name: str) -> tuple[float, float]:
     return float(limit.get("lower", 0.0)), float(limit.get("upper", 0.0))
 
 
+def _parse(source: str, label: str) -> ET.Element:
+    """The URDF's root. Files made for other tools use namespace prefixes they never declare
+    (Drake's `<drake:collision_filter_group>`), which ROS's and pybullet's parsers let pass:
+    such prefixes are declared here so the file parses (those elements are dropped anyway)."""
+    declared = set(re.findall(r"xmlns:([\w.-]+)=", source))
+    used = set(re.findall(r"</?([A-Za-z_][\w.-]*):[A-Za-z_]", source)) - declared - {"xml"}
+    if used:
+        names = " ".join(f'xmlns:{prefix}="urn:undeclared:{prefix}"' for prefix in sorted(used))
+        source = re.sub(r"<robot\b", f"<robot {names}", source, count=1)
+    try:
+        return ET.fromstring(source)
+    except ET.ParseError as exc:
+        raise GripperFileError(f"{label}: not valid XML ({exc})") from None
+
+
 def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, PreparedUrdf]:
     """The rewritten URDF text and the layout the Hand needs (path left empty)."""
     folder = Path(spec.folder)
     urdf_dir = resolve_inside(folder, spec.urdf).parent
-    try:
-        robot = ET.fromstring(source)
-    except ET.ParseError as exc:
-        raise GripperFileError(f"{spec.urdf}: not valid XML ({exc})") from None
+    robot = _parse(source, spec.urdf)
     links = {link.get("name"): link for link in robot.findall("link")}
     joints = robot.findall("joint")
     keep = _subtree(links, joints, spec.base_link)
@@ -251,6 +264,15 @@ def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, 
     taken = set(rename.values())
     for name in keep - set(rename):  # fixed links (pybullet merges them into their parent)
         rename[name] = name if name not in taken else f"{name}_fixed"
+
+    # A link without <inertial> has no mass in the URDF standard, but pybullet gives it 1 kg:
+    # give it a gram instead (a massless link of a moving multibody is not simulable).
+    for link in robot.findall("link"):
+        if link.find("inertial") is None:
+            ET.SubElement(link, "inertial").extend([
+                ET.fromstring('<mass value="0.001"/>'),
+                ET.fromstring('<inertia ixx="1e-8" ixy="0" ixz="0" iyy="1e-8" iyz="0" '
+                              'izz="1e-8"/>')])
 
     # Re-root at the palm frame.
     to_palm = np.linalg.inv(palm_transform(spec))
