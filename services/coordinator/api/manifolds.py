@@ -20,7 +20,11 @@ from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds import export
 from graspscape.services.coordinator.manifolds import service as manifolds
 from graspscape.services.coordinator.manifolds.robust import coarser_for_error, error_in_steps
-from graspscape.services.coordinator.manifolds.summary import ManifoldSummary, table_rows_of
+from graspscape.services.coordinator.manifolds.summary import (
+    ManifoldSummary,
+    dust_line,
+    table_rows_of,
+)
 from pydantic import BaseModel, Field
 
 router = APIRouter(tags=["manifolds"], route_class=FiniteJSONRoute)
@@ -31,15 +35,32 @@ Label = Annotated[str, Path(pattern=_LABEL, description="manifold label: A, B, �
 _NOT_FOUND: dict[int | str, dict[str, Any]] = {404: error("no such exploration or manifold")}
 
 
+class DustLine(BaseModel):
+    """The manifolds under 1 % of the viable volume, as one entry."""
+
+    manifolds: int
+    poses: int
+    volume_cm3: float
+
+
 class ManifoldList(BaseModel):
     exploration_id: int
     final: bool = Field(description="true once the exploration completed")
     manifolds: list[ManifoldSummary]
+    dust: DustLine | None = Field(default=None, description="the manifolds that are not "
+                                  "`large` (under 1 % of the viable volume) as one entry")
+
+
+def _dust(items: list[ManifoldSummary]) -> DustLine | None:
+    line = dust_line(items)
+    return DustLine(**line) if line is not None else None
 
 
 class ManifoldTable(ManifoldList):
-    table: list[dict[str, Any]] = Field(description="one short row per manifold (the docs' "
-                                        "table): label, description, poses, μs, best key")
+    table: list[dict[str, Any]] = Field(description="one short row per large manifold (the "
+                                        "docs' table: label, description, poses, volume, core "
+                                        "volume, μs, best and robust best), then the dust as "
+                                        "one row")
 
 
 class CertificationEvidence(BaseModel):
@@ -95,10 +116,12 @@ def _label_number(label: str) -> int:
             responses=_NOT_FOUND, summary="The behavioral manifolds, largest first")
 def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
     manifolds.ensure_manifolds(session, exploration_id)
+    items = manifolds.stored_manifolds(session, exploration_id)
     return ManifoldList(
         exploration_id=exploration_id,
         final=manifolds.is_final(session, exploration_id),
-        manifolds=manifolds.stored_manifolds(session, exploration_id),
+        manifolds=items,
+        dust=_dust(items),
     )
 
 

@@ -246,3 +246,31 @@ def table_rows_of(manifolds: list[ManifoldSummary]) -> list[dict[str, Any]]:
             "mu_s_max": round(max(s.mu_s_max for s in dust), 4),
         })
     return rows
+
+
+def dust_line(manifolds: list[ManifoldSummary]) -> dict[str, Any] | None:
+    """The manifolds that are not large, as one entry (None where there are none)."""
+    small = [m for m in manifolds if not m.large]
+    if not small:
+        return None
+    return {"manifolds": len(small), "poses": sum(m.pose_count for m in small),
+            "volume_cm3": round(sum(m.volume_cm3 for m in small), 3)}
+
+
+def table_text(manifolds: list[ManifoldSummary]) -> str:
+    """The manifold table as text lines (`graspscape map show`): one line per large manifold
+    with its volume, robust core and robust best, then the dust as one line."""
+    lines = []
+    for row in table_rows_of(manifolds):
+        if row["label"] == "dust":
+            lines.append(f"dust: {row['manifolds']} manifolds, {row['poses']} poses, "
+                         f"{row['volume_cm3']:.1f} cm³ in all")
+            continue
+        best = (f"robust best {row['robust_best']} (s {row['robust_best_s']:.2f}, "
+                f"q {row['robust_best_q']:.3f}, {row['robust_best_label']})"
+                if row["robust_best"] else "no robust best")
+        core = row["core_volume_cm3"]
+        lines.append(f"{row['label']}: {row['poses']} poses, {row['volume_cm3']:.1f} cm³, "
+                     f"core {core if core is not None else float('nan'):.1f} cm³, "
+                     f"max μs {row['mu_s_max']:.3f}; {best}")
+    return "\n".join(lines)

@@ -68,12 +68,19 @@ def _sessions(url: str | None) -> Any:
 
 
 def write_picture(sessions: Any, exploration_id: int, args: argparse.Namespace) -> None:
+    """Writes the picture, then prints the manifold table: a line per large manifold (volume,
+    robust core, robust best), the dust as one line."""
+    from graspscape.services.coordinator.manifolds.service import stored_manifolds
+    from graspscape.services.coordinator.manifolds.summary import table_text
     from graspscape.services.coordinator.maps.picture import write_map_files
 
     with sessions() as session:
         manifolds, poses = write_map_files(session, exploration_id, args.out, cut=args.cut,
                                            phi0_deg=args.phi0, attitude=args.attitude)
+        table = table_text(stored_manifolds(session, exploration_id))
     print(f"{args.out}: {manifolds} manifolds, {poses} poses")
+    if table:
+        print(table)
 
 
 def _show(args: argparse.Namespace) -> int:
@@ -109,9 +116,19 @@ def _export(args: argparse.Namespace) -> int:
     sessions = _sessions(args.database_url)
     with sessions() as session:
         ensure_manifolds(session, args.exploration_id)
-        if args.what == "manifolds.json":
+        if args.what == "manifolds.json":  # as GET …/export/manifolds.json
+            from graspscape.services.coordinator.manifolds.service import is_final
+            from graspscape.services.coordinator.manifolds.summary import (
+                dust_line,
+                table_rows_of,
+            )
+
             items = stored_manifolds(session, args.exploration_id)
-            args.out.write_text(json.dumps([m.model_dump(mode="json") for m in items], indent=2))
+            args.out.write_text(json.dumps({
+                "exploration_id": args.exploration_id,
+                "final": is_final(session, args.exploration_id),
+                "manifolds": [m.model_dump(mode="json") for m in items],
+                "dust": dust_line(items), "table": table_rows_of(items)}, indent=2))
         else:
             with args.out.open("wb") as out:  # streamed in chunks, as the REST export
                 export.write_poses(session, args.exploration_id,

@@ -217,6 +217,7 @@ def test_the_manifold_table_carries_core_robust_best_and_dust() -> None:
         build_map,
         robust_order,
         table_rows,
+        table_text,
     )
 
     lattice = Lattice(PoseGridSpec(dtheta=math.radians(20), r_min=0.01, r_max=0.01), 0)
@@ -247,3 +248,6 @@ def test_the_manifold_table_carries_core_robust_best_and_dust() -> None:
     assert rows[0]["robust_best"] == disc.robust_best.key
     assert (rows[1]["manifolds"], rows[1]["poses"]) == (1, 1)
     assert rows[1]["volume_cm3"] == lone.volume_cm3
+    text = table_text(mmap.manifolds).splitlines()
+    assert len(text) == 2 and text[0].startswith("A: ") and text[1].startswith("dust: 1 ")
+    assert f"robust best {disc.robust_best.key} (s 1.00" in text[0]

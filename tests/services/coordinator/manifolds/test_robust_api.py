@@ -57,12 +57,38 @@ def _best(client: TestClient, eid: int, **params) -> dict:
 
 
 @pytest.mark.slow
-def test_best_and_the_table_on_the_robust_map(client: TestClient, sessions,
-                                              named_object) -> None:
+def test_best_and_the_table_on_the_robust_map(client: TestClient, sessions, named_object,
+                                              db_url: str, tmp_path, capsys) -> None:
     explored = _explore(sessions, named_object)
     _check_best(client, sessions, explored)
     _check_pose_error(client, explored)
     _check_table(client, sessions, explored)
+    _check_cli(client, explored, db_url, tmp_path, capsys)
+
+
+def _check_cli(client: TestClient, explored: tuple[int, str, str], db_url: str, tmp_path,
+               capsys) -> None:
+    """`map export … manifolds.json` writes what the route serves; `map show` prints the
+    table: the large manifold with its core and robust best, the dust as one line."""
+    import json
+
+    from graspscape.services.local.cli import main
+
+    eid, north, _ = explored
+    out = tmp_path / "manifolds.json"
+    assert main(["map", "export", str(eid), "--what", "manifolds.json", "-o", str(out),
+                 "--database-url", db_url]) == 0
+    assert json.loads(out.read_text()) == client.get(
+        f"/explorations/{eid}/export/manifolds.json").json()
+    listed = client.get(f"/explorations/{eid}/manifolds").json()
+    assert (listed["dust"]["manifolds"], listed["dust"]["poses"]) == (1, 1)
+    capsys.readouterr()
+    assert main(["map", "show", str(eid), "-o", str(tmp_path / "map.png"),
+                 "--database-url", db_url]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].startswith("A: ") and f"robust best {north}" in lines[1]
+    assert "core " in lines[1] and "robust)" in lines[1]
+    assert lines[2].startswith("dust: 1 manifolds, 1 poses") and len(lines) == 3
 
 
 def _check_best(client: TestClient, sessions, explored: tuple[int, str, str]) -> None:
