@@ -188,9 +188,11 @@ def robust_scores(
     points: Iterable[Point] | None = None,
     *,
     coarser: int = 0,
+    hood: Neighbourhoods | None = None,
 ) -> dict[Point, RobustScore]:
-    """The robust score of each of `points` (every stored sample when None) that is stored."""
-    hood = Neighbourhoods(lattice, coarser)
+    """The robust score of each of `points` (every stored sample when None) that is stored
+    (`hood`: neighbourhoods already computed for this lattice and `coarser`, to reuse)."""
+    hood = hood or Neighbourhoods(lattice, coarser)
     out = {}
     for p in sorted(samples) if points is None else points:
         sample = samples.get(p)
@@ -206,9 +208,10 @@ def robust_core(
     members: Iterable[Point],
     *,
     coarser: int = 0,
+    hood: Neighbourhoods | None = None,
 ) -> set[Point]:
     """The members of one manifold whose whole N_δ is stored and in the same manifold."""
-    hood = Neighbourhoods(lattice, coarser)
+    hood = hood or Neighbourhoods(lattice, coarser)
     inside = set(members)
     return {p for p in inside if all(q in inside and q in samples for q in hood(p))}
 

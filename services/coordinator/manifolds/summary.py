@@ -33,6 +33,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
 )
 from graspscape.services.coordinator.manifolds.robust import (
     LARGE_SHARE,
+    Neighbourhoods,
     RobustLabel,
     RobustScore,
     large_manifolds,
@@ -151,7 +152,8 @@ def build_map(
     def lookup(p: Point) -> StoredPose | None:
         return samples.get(p)
 
-    scores = robust_scores(lattice, samples)
+    hood = Neighbourhoods(lattice)  # N_δ at the finest step, shared by scores and cores
+    scores = robust_scores(lattice, samples, hood=hood)
     viable_mask = fine.labels >= 0
     _, first = np.unique(fine.position_ids[viable_mask], return_index=True)
     viable_volume = float(fine.weights[viable_mask][first].sum())
@@ -160,7 +162,7 @@ def build_map(
     for old in order:
         members = comps[old]
         ss = [samples[p] for p in members]
-        core = robust_core(lattice, samples, members)
+        core = robust_core(lattice, samples, members, hood=hood)
         top = min(members, key=lambda p: robust_order(samples[p], scores[p]))
         mus = [s.mu_s for s in ss]
         best = min(ss, key=lambda s: (-s.mu_s, s.key))
