@@ -11,7 +11,8 @@ Problems looked for: a joint that never moves while the hand closes in free air,
 whose links never reach the palm's axis (in the plane it closes in: it cannot hold anything
 centred on the palm),
 links that interpenetrate in the open hand (parent and child links, which meet at their
-joint, excepted), a declared reach that is not the measured one, nothing held on the sphere.
+joint, excepted), a joint that closes past its limits, a declared reach that is not the
+measured one, nothing held on the sphere.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ CHECK_EVERY_STEPS = 24
 MOVED_AT_LEAST = 0.02  # rad (revolute) or m / 10 (prismatic: 2 mm)
 AXIS_REACH_M = 0.005  # a finger's links must come this close to the palm's axis
 INTERPENETRATION_M = 0.001
+LIMIT_SLACK = 0.02  # rad or m a joint may stand past its limit (pybullet's limits are soft)
 REACH_TOLERANCE_M = 0.005
 TRY_POSES = (
     ("side", Pose(theta=math.pi / 2, phi=0.0, r=0.02)),
@@ -219,11 +221,17 @@ def _free_air(spec: AnyGripperSpec, cache: Path, out_dir: Path | None) -> dict:
         vendor = hand.model.vendor_names or {}
         travel = []
         for name, j in movable:
-            prismatic = get_joint_info(client, hand.body, j).joint_type == p.JOINT_PRISMATIC
+            info = get_joint_info(client, hand.body, j)
+            prismatic = info.joint_type == p.JOINT_PRISMATIC
             moved = abs(closed[name] - opened[name]) >= (
                 MOVED_AT_LEAST / 10 if prismatic else MOVED_AT_LEAST)
             travel.append(JointTravel(joint=name, vendor=vendor.get(f"{name}_joint", name),
                                       open=opened[name], closed=closed[name], moved=moved))
+            lower, upper = info.joint_lower_limit, info.joint_upper_limit
+            if lower < upper and not lower - LIMIT_SLACK <= closed[name] <= upper + LIMIT_SLACK:
+                found["problems"].append(
+                    f"joint {name} ({vendor.get(f'{name}_joint', name)}) closed to "
+                    f"{closed[name]:+.3f}, past its limits [{lower:+.3f}, {upper:+.3f}]")
             if not moved and not name.endswith("_spread"):
                 found["problems"].append(
                     f"joint {name} ({vendor.get(f'{name}_joint', name)}) never moved while "
