@@ -17,7 +17,7 @@ from pydantic import BaseModel, Field
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .gripper import list_grippers, load_gripper
+from .gripper import GripperSpec, list_grippers, load_gripper
 from .object_names import (
     NAMED_SIZE_M,
     unknown_name_message,
@@ -76,8 +76,11 @@ class ObjectReport(BaseModel):
 
 @functools.cache
 def gripper_reach_m() -> float:
-    """The longest reach of the shipped grippers: the object must suit at least one of them."""
-    return max(load_gripper(name).reach() for name in list_grippers())
+    """The longest reach of the shipped grippers of boxes (TOML specs): the object must suit at
+    least one of them. Grippers from URDFs (docs/grippers.md) leave the limits where they
+    were: pybullet's WSG-50 with its 15 cm finger boxes would loosen them by half."""
+    specs = [load_gripper(name) for name in list_grippers()]
+    return max(spec.reach() for spec in specs if isinstance(spec, GripperSpec))
 
 
 def _issue(code: IssueCode, message: str) -> ObjectIssue:
