@@ -6,6 +6,7 @@ environment runs under stable-baselines3's own `learn`."""
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import sys
 
@@ -28,6 +29,12 @@ GRID = {"dtheta": math.radians(45), "r_min": 0.005, "r_max": 0.02, "dr": 0.005,
         "attitudes": {"rolls": 4}}
 ORACLE_BEST_MU_S = 0.8  # test_cmaes.py: θ → 0, φ = π/2, r ≤ 0.012
 
+# Tests that run PPO need the optional extra `rl` (CI installs it: .ci/run).
+needs_rl = pytest.mark.skipif(
+    any(importlib.util.find_spec(m) is None
+        for m in ("torch", "stable_baselines3", "gymnasium")),
+    reason="the optional extra rl is not installed (README, 'Set up')")
+
 
 def _spec(object_id: int, **strategy) -> ExplorationSpec:
     return ExplorationSpec(object_id=object_id, grid=GRID, strategy={"name": "ppo", **strategy})
@@ -40,6 +47,7 @@ def _rows(sessions, eid: int) -> list[PoseRow]:
 
 # SQLite only in the default run (the store is the same code on both; the slow physics test
 # of every explorer runs on both databases).
+@needs_rl
 @pytest.mark.parametrize("db_url", ["sqlite"], indirect=True)
 def test_ppo_is_seeded_repeatable_in_rollouts_and_finds_held_grasps(sessions,
                                                                     named_object) -> None:
@@ -68,6 +76,7 @@ def test_ppo_is_seeded_repeatable_in_rollouts_and_finds_held_grasps(sessions,
     assert set(other).isdisjoint(stored)
 
 
+@needs_rl
 def test_resuming_the_kept_search_equals_replaying_from_the_seed() -> None:
     spec = ExplorationSpec(object_id=1, grid=GRID,
                            strategy={"name": "ppo", "poses": 10_000, "seed": 4, "batch": 8,
@@ -113,6 +122,7 @@ def test_without_the_rl_extra_a_submission_is_refused_saying_how_to_install(monk
     assert "download.pytorch.org/whl/cpu" in refused.value.message
 
 
+@needs_rl
 @pytest.mark.slow  # a whole search to its budget, on both databases
 def test_ppo_learns_towards_the_oracles_best(sessions, named_object) -> None:
     spec = _spec(named_object("sphere"), poses=384, seed=0, batch=32, objective="mu_s",
@@ -127,6 +137,7 @@ def test_ppo_learns_towards_the_oracles_best(sessions, named_object) -> None:
     assert np.mean(q[-96:]) > np.mean(q[:96]) + 0.05
 
 
+@needs_rl
 @pytest.mark.slow  # stable-baselines3's own training loop, 20 rollouts
 def test_the_environment_runs_under_stable_baselines3_learn() -> None:
     from stable_baselines3 import PPO
