@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from graspscape.shared.specs.gripper import CONFIG_DIR, load_gripper
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.gripper.check import check_gripper
 from graspscape.workers.sim.gripper.compare import compare, grid_50
 
@@ -27,6 +28,16 @@ def test_each_shipped_gripper_holds_the_sphere(make_evaluator, name: str) -> Non
     assert result.viable and result.outcome.value == "held"
     fingers = {link.split("_")[0] for link in result.contacts_per_link} - {"palm"}
     assert len(fingers) >= 2
+
+
+@pytest.mark.parametrize("name", ["franka_hand", "pr2_gripper", "robotiq_3f_urdf"])
+def test_the_haptic_policy_runs_unchanged_on_urdf_grippers(make_evaluator, name: str) -> None:
+    """G_s senses the palm and every actuated link and moves the actuated joints; a coupled
+    finger moves with its driver through the gear. (The WSG-50 makes no contact: docs.)"""
+    evaluator = make_evaluator("sphere", gripper=name,
+                               settings=SimSettings(policy_name="haptic"))
+    result = evaluator.evaluate(Pose(theta=math.pi / 2, phi=0.0, r=0.02, roll=math.pi / 2))
+    assert result.viable and result.outcome.value == "held"
 
 
 def test_the_urdf_robotiq_agrees_with_the_toml_one_on_the_mug(sim_cache: Path) -> None:
