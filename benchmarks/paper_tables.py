@@ -42,6 +42,7 @@ raise `--processes`.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import statistics
@@ -50,6 +51,7 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from graspscape.services.coordinator import db
@@ -304,6 +306,105 @@ def _init_worker(grids: list[PoseGrid]) -> None:
         _register_grid(grid)
 
 
+# --- the docs' tables, beside the paper's -------------------------------------------------
+
+# The paper's figures (shared/paper, Tables 1-3) for the objects it and we both have.
+PAPER_T1 = {  # min τ for the grasp chosen by μs, μg, μf, μm, N·m
+    "sphere": (1.48, 1.48, 1.48, 1.48), "dumbbell": (1.29, 1.53, 1.29, 1.31),
+    "ycb:YcbChipsCan": (1.54, 1.54, 1.55, 1.54), "ycb:YcbPowerDrill": (1.87, 2.13, 2.31, 2.03),
+    "ycb:YcbHammer": (2.32, 2.32, 2.30, 2.33), "ycb:YcbBanana": (0.52, 0.52, 0.53, 0.52),
+    "spiked_ball": (1.46, 1.46, 1.46, 1.46),
+}
+PAPER_T2 = {  # v_c, v_s (cm³), best μ of G_c, of G_s
+    "sphere": (125.7, 125.7, 0.88, 0.88), "cube": (119.2, 120.3, 0.74, 0.74),
+    "dumbbell": (138.2, 139.2, 0.94, 0.94), "ycb:YcbChipsCan": (136.2, 136.5, 0.91, 0.91),
+    "ycb:YcbPowerDrill": (136.6, 158.3, 0.53, 0.87), "ycb:YcbHammer": (138.2, 163.2, 0.74, 0.76),
+    "spiked_ball": (113.9, 125.4, 0.43, 0.43),
+}
+PAPER_T3 = {  # quality, # of grasps, misses, time, as fractions of PPO
+    "adaptive_1": (0.7642, 0.6771, 0.9448, 0.2361),
+    "adaptive_2": (0.8391, 0.8248, 0.8468, 0.4281),
+    "adaptive_4": (0.9931, 0.9832, 0.7646, 0.7352),
+    "adaptive_8": (1.0003, 1.0061, 0.7516, 1.7019),
+}
+
+
+SYMBOL = {"mu_s": "μs", "mu_g": "μg", "mu_f": "μf", "mu_m": "μm",
+          "torque_margin_ratio": "margin"}
+
+
+def _f(value: Any, digits: int = 2) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, float):
+        return f"{value:.{digits}f}"
+    return str(value)
+
+
+def _pct(value: float | None) -> str:
+    return "—" if value is None else f"{100 * value:.1f} %"
+
+
+def markdown(rows: dict[str, Any]) -> str:
+    """Tables 1-3 of a results file's rows, ours beside the paper's where it has the object."""
+    out = ["#### Table 1: minimum closing effort (N·m) of the best grasp by each metric",
+           "", "| object | by μs | by μg | by μf | by μm | by torque margin | paper by μs / μg "
+           "/ μf / μm |", "|---|---|---|---|---|---|---|"]
+    for name, t1 in rows["table1"].items():
+        cells = []
+        for metric in TABLE1_METRICS:
+            entry = t1.get(metric)
+            if entry is None:
+                cells.append("—")
+            else:
+                effort = entry["min_closing_effort_nm"]
+                mark = "≤ " if entry.get("holds_at_floor") else ""
+                cells.append(f"{mark}{_f(effort)} ({SYMBOL[metric]} {_f(entry['value'])})"
+                             if effort is not None else "drops")
+        paper = PAPER_T1.get(name)
+        out.append(f"| {name} | " + " | ".join(cells) + " | "
+                   + (" / ".join(f"{v:.2f}" for v in paper) if paper else "—") + " |")
+    out += ["", "#### Table 2: G_c (baseline) against G_s (haptic) on one pose grid", "",
+            "| object | v_c cm³ | v_s cm³ | G_c poses G_s holds | best μs G_c | best μs G_s "
+            "| best μg c / s | paper v_c / v_s | paper μ c / s |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows["table2"]:
+        c, s = row["baseline"], row["haptic"]
+        paper = PAPER_T2.get(row["object"])
+        out.append(
+            f"| {row['object']} | {_f(c['volume_cm3'], 1)} | {_f(s['volume_cm3'], 1)} | "
+            f"{_pct(row['contained_share'])} ({row['lost_by_haptic']} lost) | "
+            f"{_f(c['best_mu_s'])} | {_f(s['best_mu_s'])} | "
+            f"{_f(c['best_mu_g'])} / {_f(s['best_mu_g'])} | "
+            + (f"{paper[0]} / {paper[1]} | {paper[2]} / {paper[3]} |" if paper else "— | — |"))
+    out += ["", "#### Table 3: explorers as fractions of PPO (mean over objects)", "",
+            "| explorer | quality | # of grasps | misses | time | paper quality / grasps / "
+            "misses / time |", "|---|---|---|---|---|---|"]
+    for label, fr in rows["table3_fractions"].items():
+        paper = PAPER_T3.get(label)
+        out.append(f"| {label} | {_pct(fr['quality'])} | {_pct(fr['grasps'])} | "
+                   f"{_pct(fr['misses'])} | {_pct(fr['time'])} | "
+                   + (" / ".join(_pct(v) for v in paper) if paper else "—") + " |")
+    out += ["", "#### Table 3, absolute (per object)", "",
+            "| object | explorer | evaluations | quality μs | grasps | misses | grasp types | "
+            "time s | first grasp s |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, t3 in rows["table3"].items():
+        for label, r in t3["runs"].items():
+            out.append(f"| {name} | {label} | {r['evaluations']} | {_f(r['quality_mu_s'], 3)} | "
+                       f"{r['grasps']} | {r['misses']} | {r['grasp_types']} | "
+                       f"{_f(r['time_s'], 1)} | {_f(r['time_to_first_grasp_s'], 1)} |")
+        p = t3["ppo"]
+        out.append(
+            f"| {name} | PPO mean ± sd ({p['seeds']} seeds) | {p['evaluations']:.0f} | "
+            f"{p['quality_mu_s']:.3f} ± {p['quality_mu_s_std']:.3f} | "
+            f"{p['grasps']:.1f} ± {p['grasps_std']:.1f} | {p['misses']:.1f} ± "
+            f"{p['misses_std']:.1f} | — | {p['time_s']:.1f} ± {p['time_s_std']:.1f} | — |")
+    out.append("")
+    out.append("(paper, PPO absolute: quality 0.78, 6234.53 grasps, 4527.64 misses, "
+               "34.65 min per object)")
+    return "\n".join(out)
+
+
 # --- the harness -------------------------------------------------------------------------
 
 
@@ -371,12 +472,18 @@ def main() -> None:
                         "object beside the checkout")
     parser.add_argument("--processes", type=int, default=2, help="worker processes")
     parser.add_argument("--name", default="paper_tables", help="results file name")
+    parser.add_argument("--render", metavar="RESULTS_JSON",
+                        help="print the docs' markdown tables of a results file; run nothing")
     args = parser.parse_args()
+    if args.render:
+        print(markdown(json.loads(Path(args.render).read_text())["rows"]))
+        return
     objects = list(all_ycb()) if args.objects == ["all"] else args.objects
     size = SIZES[args.size]
     load_before = round(os.getloadavg()[0], 2)
     out = run(objects, size, args.processes)
     out["figures"]["load_avg_1min_at_start"] = load_before
+    print(markdown(out["rows"]))
     write_results(args.name, out["figures"], extra={
         "size": args.size, "objects": objects,
         "sizes": {k: repr(v) for k, v in SIZES.items() if k == args.size},
