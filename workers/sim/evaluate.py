@@ -58,8 +58,7 @@ from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.signature import build_signature
 from graspscape.workers.sim.start_gap import first_clear_gap
-from graspscape.workers.sim.trajectory import reference_pose
-from scipy.spatial.transform import Rotation
+from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
 
 FIXTURE_MAX_FORCE_N = 5000.0
 
@@ -318,24 +317,20 @@ class Evaluator:
         instants = {min(n_steps - 1, int((k + 0.5) * n_steps / metric.instants))
                     for k in range(metric.instants)}
 
-        # The reference path, once: the trajectory and every probe window read it.
-        path = [reference_pose(spec, start_pos, start_rot, pivot, step * dt)
-                for step in range(n_steps + metric.window_steps + 1)]
-
-        def target(step: int) -> tuple[np.ndarray, np.ndarray]:
-            if step < len(path):
-                return path[step]
-            return reference_pose(spec, start_pos, start_rot, pivot, step * dt)
-
+        # The reference path, step by step as it is first read (a drop ends it early), kept
+        # for the probe windows that read their steps again.
+        path = ReferencePath(spec, start_pos, start_rot, pivot, dt)
+        target = path.pose
         ctx = ProbeContext(client=cid, hand_body=hand.body, object_body=scene.object_body,
                            drive=scene.drive_to, target=target,
-                           contact_free_state=self.pristine)
+                           contact_free_state=self.pristine, target_drive=path.drive,
+                           drive_quat=scene.drive_to_quat)
 
         def slipped() -> bool:
             pos, rot = hand.frame_pose()
             o_pos, o_rot = scene.object_pose()
             moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
-            turned = Rotation.from_matrix((rot.T @ o_rot) @ rel_rot0.T).magnitude()
+            turned = rotation_angle((rot.T @ o_rot) @ rel_rot0.T)
             return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
 
         effort = 0.0
@@ -351,8 +346,7 @@ class Evaluator:
             for step in range(n_steps if held else 0):
                 if probes and step in instants:
                     saved[step] = kept.enter_context(saved_state(cid, restore=False))
-                position, rotation = target(step + 1)
-                scene.drive_to(position, rotation)
+                scene.drive_to_quat(*path.drive(step + 1))
                 scene.step()
                 phases.trajectory_steps += 1
                 effort = max(effort, hand.max_finger_torque())

@@ -197,5 +197,11 @@ def scene_metrics(scene, length: float, mass_kg: float) -> dict[str, float]:
         # G has no full rank, so no combination of the contacts' forces spans the wrench
         # space: the hulls are flat and ε is 0. Skipping Qhull saves most of the cost here.
         return {"mu_g": 0.0, "mu_f": 0.0, "mu_m": 0.0}
-    return {"mu_g": quality, "mu_f": mu_f(contacts, length),
+    f = mu_f(contacts, length)
+    if f == 0.0:
+        # The origin is not strictly inside the unit-force hull. μm's wrenches are the same
+        # ones scaled by each contact's force (≥ 0), which spans the same cone or a smaller
+        # one, so the origin is not inside its hull either: μm is 0 too, without a second hull.
+        return {"mu_g": quality, "mu_f": 0.0, "mu_m": 0.0}
+    return {"mu_g": quality, "mu_f": f,
             "mu_m": mu_m(contacts, length, mass_kg * STANDARD_GRAVITY)}

@@ -39,6 +39,14 @@ class Scene:
                            jointChildFrameOrientation=quat_from_matrix(rotation),
                            maxForce=max_force, physicsClientId=self.client)
 
+    def drive_to_quat(self, position: list[float], quaternion: list[float],
+                      max_force: float = DRIVE_MAX_FORCE_N) -> None:
+        """`drive_to` with the position and rotation already converted (ReferencePath.drive):
+        the same constraint change, without the conversion."""
+        p.changeConstraint(self.drive_constraint, jointChildPivot=position,
+                           jointChildFrameOrientation=quaternion,
+                           maxForce=max_force, physicsClientId=self.client)
+
     def step(self) -> None:
         p.stepSimulation(physicsClientId=self.client)
 

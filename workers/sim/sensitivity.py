@@ -57,6 +57,11 @@ class ProbeContext:
     target: TargetFn  # reference gripper frame pose at a step index
     # A saved state in which nothing touches (the evaluator's pristine one); see restore_clean.
     contact_free_state: int
+    # Optional shortcut for the rollouts that drive to the reference rotation (the unperturbed
+    # and the linear ones): the drive's position list and quaternion of a step, converted once
+    # (trajectory.ReferencePath.drive), and a drive that takes them (Scene.drive_to_quat).
+    target_drive: Callable[[int], tuple[list[float], list[float]]] | None = None
+    drive_quat: Callable[[list[float], list[float]], None] | None = None
 
 
 def restore_clean(ctx: ProbeContext, state: int) -> None:
@@ -137,9 +142,21 @@ def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSetting
     anchor_local = anchor_point(ctx)
     pivot = np.array(get_point(cid, ctx.object_body))
 
+    quick = ctx.target_drive is not None and ctx.drive_quat is not None
+
     def rollout(axis: int | None, sign: float = 1.0) -> Snapshot:
         restore_clean(ctx, state)
         for j in range(1, window + 1):
+            if quick and (axis is None or axis < 3):
+                position_list, quaternion = ctx.target_drive(step + j)  # type: ignore[misc]
+                if axis is not None:
+                    # As drive_to would: the offset added to the array, then listed.
+                    offset = np.zeros(3)
+                    offset[axis] = linear * (sign * 0.5 * (j * dt) ** 2)
+                    position_list = (ctx.target(step + j)[0] + offset).tolist()
+                ctx.drive_quat(position_list, quaternion)  # type: ignore[misc]
+                p.stepSimulation(physicsClientId=cid)
+                continue
             position, rotation = ctx.target(step + j)
             if axis is not None:
                 amount = sign * 0.5 * (j * dt) ** 2
