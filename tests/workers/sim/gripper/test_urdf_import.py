@@ -148,34 +148,51 @@ def test_the_rewrite_puts_the_base_at_the_palm_and_closes_positive(tmp_path: Pat
     assert prepared.vendor_names["L_1"] == "left_pad"
 
 
-def test_the_follower_closes_with_its_driver_on_a_box(tmp_path: Path) -> None:
-    """Physics: one actuator, two fingers. The follower moves only through the gear constraint,
-    so both pads reaching a box in the middle at the same time is the coupling at work."""
-    spec = _gripper(tmp_path / "jaw")
+def _close(spec: UrdfGripperSpec, cache: Path, box: bool) -> tuple[dict[str, float], set[int],
+                                                                   dict[str, int]]:
+    """Closes the hand fixed at the origin for 2 s, on a 3 cm box between the pads or in free
+    air: the joint angles, the links touching the box, the joint indices."""
     client = p.connect(p.DIRECT)
     try:
         p.setGravity(0, 0, 0, physicsClientId=client)
-        hand = Hand(client, spec, tmp_path / "cache")
+        hand = Hand(client, spec, cache)
         com, orn = hand.com_pose_for(np.zeros(3), np.eye(3))
         p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=client)
         p.createConstraint(hand.body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0],
                            (-hand.base_inertial_offset).tolist(), [0, 0, 0],
                            physicsClientId=client)
-        box = p.createMultiBody(0, p.createCollisionShape(
+        target = p.createMultiBody(0, p.createCollisionShape(
             p.GEOM_BOX, halfExtents=[0.015, 0.01, 0.02], physicsClientId=client),
-            basePosition=[0, 0, 0.03], physicsClientId=client)
+            basePosition=[0, 0, 0.03 if box else 1.0], physicsClientId=client)
         hand.reset_open(0.0, spec.closing_effort, 3.0)
         hand.begin_closing(0.2)
         for _ in range(480):
             p.stepSimulation(physicsClientId=client)
-        angles = hand.joint_angles()
-        touching = {c[3] for c in p.getContactPoints(hand.body, box, physicsClientId=client)}
+        touching = {c[3] for c in p.getContactPoints(hand.body, target, physicsClientId=client)}
+        return hand.joint_angles(), touching, hand.joint_by_name
     finally:
         p.disconnect(client)
+
+
+def test_the_follower_closes_with_its_driver_on_a_box(tmp_path: Path) -> None:
+    """Physics: one actuator, two fingers. The follower moves only through the gear constraint,
+    so both pads reaching a box in the middle at the same time is the coupling at work."""
+    angles, touching, joints = _close(_gripper(tmp_path / "jaw"), tmp_path / "cache", box=True)
     # Each pad stops at the box's face, 15 mm from the middle (closing-positive: −0.015).
     assert angles["L_1"] == pytest.approx(-0.015, abs=1e-3)
     assert angles["R_1"] == pytest.approx(-0.015, abs=1e-3)
-    assert touching == {hand.joint_by_name["L_1_joint"], hand.joint_by_name["R_1_joint"]}
+    assert touching == {joints["L_1_joint"], joints["R_1_joint"]}
+
+
+def test_a_mimic_offset_holds_once_the_driver_stops(tmp_path: Path) -> None:
+    """right = left + 1 cm (URDF values): in free air the driver stops at its limit (0) and the
+    follower stays 1 cm more open, held there by the gear's position correction."""
+    description = DESCRIPTION.replace('mimic = { joint = "left" }',
+                                      'mimic = { joint = "left", offset = 0.01 }')
+    angles, _, _ = _close(_gripper(tmp_path / "jaw", description=description),
+                          tmp_path / "cache", box=False)
+    assert angles["L_1"] == pytest.approx(0.0, abs=1e-3)
+    assert angles["R_1"] == pytest.approx(-0.01, abs=1e-3)
 
 
 def test_shipped_grippers_are_listed_with_their_licences() -> None:
