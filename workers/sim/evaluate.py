@@ -165,9 +165,9 @@ class Evaluator:
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
         """`_start_pose` where r is the open hand's clearance along its approach axis: the
         palm gap d₀ at which the hand along the surface normal first clears the object (from
-        the surface out, in `backoff_step_m` steps, then bisected to `clearance_tolerance_m`),
-        plus r. The hand can then travel r toward x_c before it touches, whatever its fingers
-        meet first."""
+        the surface out, in `backoff_step_m` steps, then bisected to `clearance_tolerance_m`;
+        clear: no penetration deeper than `penetration_tolerance_m`), plus r. The hand can
+        then travel r toward x_c before it touches, whatever its fingers meet first."""
         settings = self.settings.placement
         normal = placement.surface_normal
 
@@ -175,10 +175,11 @@ class Evaluator:
             return position + normal * (gap - placement.gap)
 
         def clear(gap: float) -> bool:
+            # "Touching" as the back-off has it (penetration_tolerance_m): with no tolerance,
+            # fingers that hang alongside a wall (from above the mug) graze it for the whole
+            # way out, and 10 points more of the mug's poses end infeasible.
             self._place(at(gap), placement.rotation)
-            points = get_closest_points(self.client, self.scene.hand.body,
-                                        self.scene.object_body, 0.0)
-            return all(pt.contact_distance >= 0.0 for pt in points)
+            return not self._penetrating()
 
         step, tolerance = settings.backoff_step_m, settings.clearance_tolerance_m
         touching = first_clear_gap(clear, 0.0, step, settings.max_backoff_m, tolerance)
