@@ -132,9 +132,10 @@ def _ring_map():  # type: ignore[no-untyped-def]
                       np.where(phi > 5.0, ROBUST_CODES["fragile"], ROBUST_CODES["robust"]))
     points = MapPoints(ring, az, ri, att, ri * lattice.dr(1), np.full(n, 0.5),
                        np.ones(n, dtype=bool), np.zeros(n, dtype=np.int64), robust)
-    # A local maximum at every direction, r = 0: in the plane and off it by up to 60°.
+    # A local maximum at every direction, r = 5 mm (off the surface: a point on it is neither
+    # in nor out for `contains`): in the plane and off it by up to 90°.
     maxima = [PoseBrief(key=str(k), theta=lattice.theta(K), phi=lattice.pose(Point(K, J, 0, 0)).phi,
-                        r=0.0, roll=0.0, pitch=0.0, yaw=0.0, mu_s=0.5, effort_max_nm=1.0)
+                        r=0.005, roll=0.0, pitch=0.0, yaw=0.0, mu_s=0.5, effort_max_nm=1.0)
               for k, (K, J) in enumerate(lattice.cells(1))]
     summary = ManifoldSummary(
         label=0, name="A", description="", digits=[], pose_count=n, evaluated_count=n,
@@ -152,8 +153,8 @@ def test_local_maxima_are_drawn_only_where_they_lie_in_the_cut() -> None:
     assert len(dots) == len(on_plane) > 8
     for x, y, label in dots:
         assert label == 0
-        # On the ring's outer wall or beyond, never inside its outline or its hole.
-        assert math.hypot(x, y) >= 0.05 - 1e-3
+        # Beyond the ring's outer wall by r, never inside its outline or its hole.
+        assert math.hypot(x, y) == pytest.approx(0.055, abs=1e-3)
         assert not mesh.contains([[x, y, 0.0]])[0]
     # Placed as before (the 3D position projected, within one coarse step of the plane), the
     # maxima 30° off the plane land on the ring's top face, inside its outline.
