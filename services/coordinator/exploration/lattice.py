@@ -101,7 +101,9 @@ class Lattice:
         return self.depth - _trailing_zeros(K, self.depth)
 
     def theta(self, K: int) -> float:
-        return K * math.pi / self.n_rings
+        # K·π/n rounds to π + 1 ulp for some n (13, 26, 47, …): a south pole out of Pose's
+        # range, which no worker could expand.
+        return min(math.pi, K * math.pi / self.n_rings)
 
     @cached_property
     def _m_birth(self) -> list[int]:
