@@ -162,7 +162,16 @@ class WorkerProcess:
         return tiles
 
     def _work(self, tile: TileLease) -> None:
-        batch = self._evaluate_tile(tile, tile.poses())
+        try:
+            poses = tile.poses()
+        except ValueError as exc:  # pydantic's ValidationError: a pose out of range
+            # The tile's fault, not this process's: reported failed with the reason, where a
+            # crash would have the tile "lost" three times with no word of why.
+            reason = f"the tile's poses are invalid: {exc}"
+            log.error("%s: tile %d failed: %s", self.worker_id, tile.tile_id, reason)
+            self._deliver(self._batch(tile, [], final=False, error=reason[:2000]))
+            return
+        batch = self._evaluate_tile(tile, poses)
         if batch is not None:
             self._send(batch, tile)
             self.poses_done += len(batch.results)
