@@ -187,8 +187,11 @@ class PoseRow(Base):
     __table_args__ = (
         # One row per pose of an exploration: the ingest's ON CONFLICT target.
         UniqueConstraint("exploration_id", "pose_key"),
-        Index("ix_poses_exploration_id_viable", "exploration_id", "viable"),
-        Index("ix_poses_exploration_id_manifold_id", "exploration_id", "manifold_id"),
+        # Keyset pages of /poses (by id), alone or with the viable or manifold filter
+        # (migration 0011; /best's indexes follow the class).
+        Index("ix_poses_exploration_id_id", "exploration_id", "id"),
+        Index("ix_poses_exploration_id_viable_id", "exploration_id", "viable", "id"),
+        Index("ix_poses_exploration_id_manifold_id_id", "exploration_id", "manifold_id", "id"),
         Index("ix_poses_exploration_id_created_at", "exploration_id", "created_at"),
         # /best's certification evidence: the few poses evaluated for another's certification.
         Index("ix_poses_exploration_id_certifies", "exploration_id", "certifies",
@@ -244,6 +247,19 @@ class PoseRow(Base):
     # evaluation of its neighbourhood); NULL for every other pose.
     certifies: Mapped[str | None] = mapped_column(String(128))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+# /best reads one of these in its answer's order and stops at `limit` (store/queries.py): by
+# the robust ranking (its default, overall and in one manifold), the torque margin ratio
+# (rank=point) and μs (migration 0011).
+Index("ix_poses_best_robust", PoseRow.exploration_id, PoseRow.viable, PoseRow.robust_label,
+      PoseRow.robust_q.desc(), PoseRow.mu_s.desc(), PoseRow.pose_key)
+Index("ix_poses_manifold_best_robust", PoseRow.manifold_id, PoseRow.viable,
+      PoseRow.robust_label, PoseRow.robust_q.desc(), PoseRow.mu_s.desc(), PoseRow.pose_key)
+Index("ix_poses_best_torque_margin_ratio", PoseRow.exploration_id, PoseRow.viable,
+      PoseRow.torque_margin_ratio.desc(), PoseRow.mu_s.desc(), PoseRow.pose_key)
+Index("ix_poses_best_mu_s", PoseRow.exploration_id, PoseRow.viable, PoseRow.mu_s.desc(),
+      PoseRow.pose_key)
 
 
 # The columns above, in this order: the static metrics, then RobustnessReport's fields.
