@@ -140,8 +140,12 @@ def test_ppo_learns_towards_the_oracles_best(sessions, named_object) -> None:
 @needs_rl
 @pytest.mark.slow  # stable-baselines3's own training loop, 20 rollouts
 def test_the_environment_runs_under_stable_baselines3_learn() -> None:
+    import torch
     from stable_baselines3 import PPO
 
+    # One thread, as the strategy runs it: on a loaded machine torch's thread pool spins.
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
     spec = ExplorationSpec(object_id=1, grid=GRID, strategy={"name": "ppo"})
 
     def evaluate(pose):
@@ -151,7 +155,10 @@ def test_the_environment_runs_under_stable_baselines3_learn() -> None:
     env = make_env(spec, evaluate, w_s=1.0, w_f=0.0)
     model = PPO("MlpPolicy", env, n_steps=32, batch_size=8, learning_rate=3e-3, seed=0,
                 device="cpu", policy_kwargs={"net_arch": [32]})
-    model.learn(total_timesteps=640)
+    try:
+        model.learn(total_timesteps=640)
+    finally:
+        torch.set_num_threads(threads)
     rewards = [reward(*evaluate(p), w_s=1.0, w_f=0.0) for p in env.unwrapped.poses]
     assert len(rewards) == 640
     assert np.mean(rewards[-160:]) > np.mean(rewards[:160])
