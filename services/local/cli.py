@@ -85,6 +85,40 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
     explore.set_defaults(handler=_explore)
 
 
+def _atlas(args: argparse.Namespace) -> int:
+    from graspscape.services.local.atlas import AtlasOptions, run_atlas
+
+    given = {"setting": args.setting, "objects_dir": args.objects, "only": tuple(args.only or ()),
+             "data_dir": args.data_dir, "out": args.out, "database_url": args.database_url,
+             "procs": args.procs, "pictures": not args.no_pictures, "quiet": args.quiet}
+    return run_atlas(AtlasOptions(**{k: v for k, v in given.items() if v is not None}))
+
+
+def _register_atlas(subparsers: argparse._SubParsersAction) -> None:
+    atlas = subparsers.add_parser(
+        "atlas", help="explore every object in ../shared/objects and the built-ins with one "
+        "setting and write a static site (docs/viewer.md)",
+        epilog="Resumable: objects already explored with the setting are skipped. Exit status "
+        "0 when every exploration is done, 2 when some ended otherwise.")
+    atlas.add_argument("--setting", choices=["reduced", "full"],
+                       help="reduced (default: 30° grid, no refinement, no robustness tests; "
+                       "under an hour on 2 cores) or full (explore's defaults)")
+    atlas.add_argument("--objects", type=Path, help="objects folder: ycb/<Folder>/model.urdf "
+                       "and mesh files (default ../shared/objects beside the checkout)")
+    atlas.add_argument("--only", action="append", metavar="NAME",
+                       help="only this object (repeatable), e.g. mug or ycb:YcbBanana")
+    atlas.add_argument("--data-dir", type=Path, help="database folder (default atlas-data)")
+    atlas.add_argument("--out", type=Path, help="site folder (default atlas)")
+    atlas.add_argument("--database-url", help="a running coordinator's database: explore on "
+                       "the workers connected to it (with --procs 0)")
+    atlas.add_argument("--procs", type=int, help="local worker processes (default: cores; 0: "
+                       "none, the coordinator's workers)")
+    atlas.add_argument("--no-pictures", action="store_true",
+                       help="no best-grasp pictures in the site (each is a simulation)")
+    atlas.add_argument("--quiet", action="store_true", help="no progress lines")
+    atlas.set_defaults(handler=_atlas)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from graspscape.services.coordinator import cli as coordinator_cli
     from graspscape.services.coordinator.maps import cli as maps_cli
@@ -100,6 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     workers_cli.register(subparsers)
     coordinator_cli.register(subparsers)
     _register_explore(subparsers)
+    _register_atlas(subparsers)
     register_run(maps_cli.register(subparsers))
     register_gripper(subparsers)
     return parser
