@@ -17,23 +17,28 @@ and 2 worker processes (services/local/run.run_local with a pool of 2), counted 
 budget accounting (exploration/accounting.py): best μs ("quality"), grasps (viable poses),
 misses, and time; as fractions of PPO's mean like the paper, and absolute.
 
-Time. The machine is shared (the load is recorded), so time is not read off the clock: an
-evaluation's time is its measured eval_time_s (CPU of one worker process), and a run's time
-is the sum over the poses it evaluated / 2 workers + the coordinator's measured store and
-decision time. The poses of one object are simulated once and reused by every run that asks
-for them (an evaluation is a pure function of pose, object, gripper and settings), at the
-eval_time_s of their first simulation. Time to the first grasp: the same sum, in the order the
-poses were stored, up to the first viable one.
+Time. The machine is shared (the load is recorded), so time is not read off the run's clock
+alone: an evaluation's time is its eval_time_s as the worker measured it (its wall clock: a
+loaded machine inflates it, for every explorer alike), and a run's time is the sum over the
+poses it evaluated / 2 workers + the coordinator's measured store and decision time. The
+poses of one object are simulated once and reused by every run that asks for them (an
+evaluation is a pure function of pose, object, gripper and settings), at the eval_time_s of
+their first simulation. Time to the first grasp: the same sum, in the order the poses were
+stored, up to the first viable one.
 
 Subset (default: `--size small`): Tables 1 and 3 on YcbTennisBall and YcbBanana, Table 2 on
-the sphere, cube, can, dumbbell and those two, with small grids and budgets, so that the
-whole run takes ≤ 25 min of wall time on the 2 shared cores of the development VM: the
-12 YCB objects at the paper's budgets are hours of simulation there. The two YCB objects are
-ones our gripper holds from most directions (the tennis ball, like the paper's foam ball and
-sphere, and the banana, the paper's "delicate" row); the drill and the chips can are refused
-as infeasible starts from most poses of the small grid, which would leave Table 1 empty.
+the sphere, cube, can, dumbbell and those two; a 90° grid of directions at one start gap (6
+directions per roll) with one round of local search, 16 evaluations per baseline run (PPO:
+2 rollouts of 8), a 2 × 2 grid for Table 2. Chosen so that it ends within about an hour on
+the development VM's 2 cores while 8 other sessions share them (load 15-25: an evaluation
+took ~5 s of wall clock there against ~0.3 s of CPU); at a load below 2 the same run takes a
+few minutes. The 12 YCB objects at the paper's budgets are hours of simulation there. The
+two YCB objects are ones our gripper holds from most directions (the tennis ball, like the
+paper's foam ball and sphere, and the banana, the paper's "delicate" row); the drill and the
+chips can start "infeasible" from the poses tried, which would leave their Table 1 empty.
 `--size full --objects all` runs every YCB object at larger grids and budgets; on more cores,
-raise `--processes`.
+raise `--processes`. The results file is rewritten after each stage (`complete` says whether
+all ran).
 
     .venv/bin/python benchmarks/paper_tables.py                       # the default subset
     .venv/bin/python benchmarks/paper_tables.py --size full --objects all --processes 16
@@ -48,7 +53,7 @@ import os
 import statistics
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -110,11 +115,11 @@ SIZES = {
                  table2_grid=PoseGrid(theta_cells=2, phi_cells=2, gap_step_m=0.02,
                                       max_gap_m=0.02),
                  effort_tolerance_nm=0.5, rolls=(1, 2), simple=()),
-    "small": Size(dtheta_deg=90, r_min=0.005, r_max=0.02, dr=0.015, levels=1, refine_max=24,
-                  search_rounds=1, budget=32, ppo_batch=8, ppo_seeds=3,
-                  table2_grid=PoseGrid(theta_cells=3, phi_cells=3, gap_step_m=0.02,
+    "small": Size(dtheta_deg=90, r_min=0.01, r_max=0.01, dr=0.01, levels=0, refine_max=0,
+                  search_rounds=1, budget=16, ppo_batch=8, ppo_seeds=3,
+                  table2_grid=PoseGrid(theta_cells=2, phi_cells=2, gap_step_m=0.02,
                                        max_gap_m=0.02),
-                  effort_tolerance_nm=0.05),
+                  effort_tolerance_nm=0.1),
     "full": Size(dtheta_deg=30, r_min=0.0, r_max=0.03, dr=0.01, levels=1, refine_max=5000,
                  search_rounds=3, budget=2000, ppo_batch=64, ppo_seeds=3,
                  table2_grid=compare_policies.GRIDS["paper"], effort_tolerance_nm=0.02),
@@ -408,33 +413,9 @@ def markdown(rows: dict[str, Any]) -> str:
 # --- the harness -------------------------------------------------------------------------
 
 
-def run(objects: Sequence[str], size: Size, processes: int = 2) -> dict[str, Any]:
-    """All three tables for `objects` (Tables 1 and 3) and `size.simple` + `objects`
-    (Table 2); returns figures and per-object rows."""
-    started = time.perf_counter()
+def summarise(rows: dict[str, Any], size: Size) -> dict[str, Any]:
+    """The figures of the rows so far (objects whose Tables 1 and 3 are done)."""
     figures: dict[str, Any] = {}
-    rows: dict[str, Any] = {"table1": {}, "table2": [], "table3": {}}
-    with ProcessPoolExecutor(processes, initializer=_init_worker,
-                             initargs=([size.table2_grid],)) as pool:
-        for name in objects:
-            runs, every, settings = table3_object(name, size, pool, processes)
-            ppo = ppo_summary(runs)
-            rows["table3"][name] = {"runs": runs, "ppo": ppo}
-            short = name.removeprefix("ycb:")
-            for label, r in runs.items():
-                for key in ("quality_mu_s", "grasps", "misses", "time_s",
-                            "time_to_first_grasp_s"):
-                    figures[f"t3.{short}.{label}.{key}"] = r[key]
-            for key in ("quality_mu_s", "grasps", "misses", "time_s"):
-                figures[f"t3.{short}.ppo_mean.{key}"] = round(ppo[key], 4)
-                figures[f"t3.{short}.ppo_std.{key}"] = round(ppo[f"{key}_std"], 4)
-            t1 = table1_object(name, every, settings, size, pool)
-            rows["table1"][name] = t1
-            for metric in TABLE1_METRICS:
-                if metric in t1:
-                    figures[f"t1.{short}.by_{metric}.min_closing_effort_nm"] = \
-                        t1[metric]["min_closing_effort_nm"]
-        rows["table2"] = table2([*size.simple, *objects], size.table2_grid, pool)
     for row in rows["table2"]:
         short = row["object"].removeprefix("ycb:")
         figures[f"t2.{short}.v_c_cm3"] = round(row["baseline"]["volume_cm3"], 2)
@@ -442,10 +423,23 @@ def run(objects: Sequence[str], size: Size, processes: int = 2) -> dict[str, Any
         figures[f"t2.{short}.contained_share"] = row["contained_share"]
         figures[f"t2.{short}.best_mu_s_c"] = row["baseline"]["best_mu_s"]
         figures[f"t2.{short}.best_mu_s_s"] = row["haptic"]["best_mu_s"]
+    objects = [n for n in rows["table3"] if n in rows["table1"]]
+    for name in objects:
+        short = name.removeprefix("ycb:")
+        runs, ppo = rows["table3"][name]["runs"], rows["table3"][name]["ppo"]
+        for label, r in runs.items():
+            for key in ("quality_mu_s", "grasps", "misses", "time_s", "time_to_first_grasp_s"):
+                figures[f"t3.{short}.{label}.{key}"] = r[key]
+        for key in ("quality_mu_s", "grasps", "misses", "time_s"):
+            figures[f"t3.{short}.ppo_mean.{key}"] = round(ppo[key], 4)
+            figures[f"t3.{short}.ppo_std.{key}"] = round(ppo[f"{key}_std"], 4)
+        for metric in TABLE1_METRICS:
+            if metric in rows["table1"][name]:
+                figures[f"t1.{short}.by_{metric}.min_closing_effort_nm"] = \
+                    rows["table1"][name][metric]["min_closing_effort_nm"]
     # Table 3 as the paper prints it: fractions of PPO's mean, averaged over the objects.
     averaged: dict[str, dict[str, float | None]] = {}
-    labels = [f"adaptive_{k}" for k in size.rolls] + ["cmaes", "random"]
-    for label in labels:
+    for label in [f"adaptive_{k}" for k in size.rolls] + ["cmaes", "random"]:
         per_object = [fractions(rows["table3"][n]["runs"][label], rows["table3"][n]["ppo"])
                       for n in objects]
         averaged[label] = {
@@ -459,9 +453,40 @@ def run(objects: Sequence[str], size: Size, processes: int = 2) -> dict[str, Any
               for lbl, r in rows["table3"][n]["runs"].items() if lbl.startswith("adaptive")]
     figures["t3.adaptive_max_time_to_first_grasp_s"] = (
         None if not firsts or None in firsts else max(firsts))
-    figures["wall_s"] = round(time.perf_counter() - started, 1)
-    figures["load_avg_1min_at_end"] = round(os.getloadavg()[0], 2)
-    return {"figures": figures, "rows": rows}
+    return figures
+
+
+def run(objects: Sequence[str], size: Size, processes: int = 2,
+        checkpoint: Callable[[dict[str, Any], bool], None] | None = None) -> dict[str, Any]:
+    """All three tables: Table 2 on `size.simple` + `objects` first, then Tables 3 and 1
+    object by object; returns figures and rows. `checkpoint(out, complete)` gets the results
+    so far after each stage (the benchmark writes them, so that a run cut short still leaves
+    the stages it finished)."""
+    started = time.perf_counter()
+    rows: dict[str, Any] = {"table1": {}, "table2": [], "table3": {}}
+
+    def out() -> dict[str, Any]:
+        figures = summarise(rows, size)
+        figures["objects_done"] = len(rows["table1"])
+        figures["wall_s"] = round(time.perf_counter() - started, 1)
+        figures["load_avg_1min_now"] = round(os.getloadavg()[0], 2)
+        return {"figures": figures, "rows": rows}
+
+    with ProcessPoolExecutor(processes, initializer=_init_worker,
+                             initargs=([size.table2_grid],)) as pool:
+        rows["table2"] = table2([*size.simple, *objects], size.table2_grid, pool)
+        if checkpoint:
+            checkpoint(out(), False)
+        for name in objects:
+            runs, every, settings = table3_object(name, size, pool, processes)
+            rows["table3"][name] = {"runs": runs, "ppo": ppo_summary(runs)}
+            rows["table1"][name] = table1_object(name, every, settings, size, pool)
+            if checkpoint and name != objects[-1]:
+                checkpoint(out(), False)
+    final = out()
+    if checkpoint:
+        checkpoint(final, True)
+    return final
 
 
 def main() -> None:
@@ -481,15 +506,18 @@ def main() -> None:
     objects = list(all_ycb()) if args.objects == ["all"] else args.objects
     size = SIZES[args.size]
     load_before = round(os.getloadavg()[0], 2)
-    out = run(objects, size, args.processes)
-    out["figures"]["load_avg_1min_at_start"] = load_before
-    print(markdown(out["rows"]))
-    write_results(args.name, out["figures"], extra={
-        "size": args.size, "objects": objects,
-        "sizes": {k: repr(v) for k, v in SIZES.items() if k == args.size},
-        "rows": out["rows"],
-    })
 
+    def write(out: dict[str, Any], complete: bool) -> None:
+        out["figures"]["load_avg_1min_at_start"] = load_before
+        out["figures"]["complete"] = complete
+        if complete:
+            print(markdown(out["rows"]))
+        write_results(args.name, out["figures"], extra={
+            "size": args.size, "objects": objects, "sizes": {args.size: repr(size)},
+            "rows": out["rows"],
+        })
+
+    run(objects, size, args.processes, checkpoint=write)
 
 if __name__ == "__main__":
     main()
