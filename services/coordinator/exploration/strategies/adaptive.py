@@ -51,7 +51,7 @@ from graspscape.services.coordinator.exploration.tiling import (
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import components
 from graspscape.services.coordinator.manifolds.service import maybe_refresh, refresh_manifolds
-from graspscape.services.coordinator.store.models import PosePlanRow, TileRow
+from graspscape.services.coordinator.store.models import ExplorationRow, PosePlanRow, TileRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -189,8 +189,13 @@ class AdaptiveStrategy:
         """The manifolds: throttled while tiles are open, for good when finished."""
         if stage == Stage.RUNNING:
             maybe_refresh(batch.session, batch.exploration_id, self.spec, self.lattice)
-        elif stage == Stage.NEW_ROUND and self._refreshed:
-            return
+        elif self._refreshed:
+            # next_round stored the manifolds of these very samples; when it planned nothing
+            # more, they are the finished exploration's (what a final refresh would note).
+            if stage == Stage.FINISHED:
+                row = batch.session.get(ExplorationRow, batch.exploration_id)
+                if row is not None:
+                    row.manifolds_final = True
         else:
             refresh_manifolds(batch.session, batch.exploration_id, self.spec, self.lattice,
                               samples=self._samples, final=stage == Stage.FINISHED)
