@@ -27,7 +27,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from graspscape.services.coordinator.exploration.object_symmetry import resolve_grid
 from graspscape.services.coordinator.exploration.service import create_exploration
@@ -165,6 +165,43 @@ def _wait(sessions: sessionmaker[Session], exploration_id: int, poll: Callable[[
         time.sleep(0.5)
 
 
+class _LocalWorkers:
+    """The coordinator's dispatch on loopback and local worker processes, started on demand."""
+
+    def __init__(self, settings: Settings, sessions: sessionmaker[Session], endpoint: str,
+                 procs: int) -> None:
+        self.settings, self.sessions, self.endpoint, self.procs = (settings, sessions,
+                                                                   endpoint, procs)
+        self.dispatcher: Any = None
+        self.supervisor: Any = None
+
+    def start(self) -> None:
+        from graspscape.services.coordinator.dispatch.service import Dispatcher
+        from graspscape.workers.runtime.config import WorkerConfig
+        from graspscape.workers.runtime.supervisor import Supervisor
+
+        if self.dispatcher is not None:
+            return
+        self.dispatcher = Dispatcher(self.settings, self.sessions)
+        self.dispatcher.start()
+        if not self.dispatcher.ready:
+            self.dispatcher.stop()
+            raise RuntimeError(f"could not open the zenoh peer on {self.endpoint}")
+        self.supervisor = Supervisor(WorkerConfig(connect=[self.endpoint], procs=self.procs,
+                                                  name="atlas"), log_level="warning")
+        self.supervisor.start()
+
+    def poll(self) -> None:
+        if self.supervisor is not None:
+            self.supervisor.poll()
+
+    def stop(self) -> None:
+        if self.supervisor is not None:
+            self.supervisor.shutdown()  # while the dispatch runs, so releases are acknowledged
+        if self.dispatcher is not None:
+            self.dispatcher.stop()
+
+
 def _wall_s(row: ExplorationRow) -> float:
     if row.started_at is None or row.finished_at is None:
         return 0.0
@@ -172,19 +209,29 @@ def _wall_s(row: ExplorationRow) -> float:
 
 
 def run_atlas(opts: AtlasOptions) -> int:
-    from graspscape.services.coordinator.dispatch.service import Dispatcher
-    from graspscape.services.local.atlas_site import write_site
-    from graspscape.services.local.explore import _free_port
-    from graspscape.workers.runtime.config import WorkerConfig
-    from graspscape.workers.runtime.supervisor import Supervisor
-
+    """Explore what is not explored yet, then write the site; 0 when every object is done."""
     say = (lambda _msg: None) if opts.quiet else (lambda msg: print(msg, file=sys.stderr))
     setting = SETTINGS[opts.setting]
     if opts.grid_override_deg is not None:
         setting = setting.model_copy(update={"dtheta_deg": opts.grid_override_deg})
     objects_dir = opts.objects_dir.resolve()
     # `ycb:` names resolve here for this process and the worker processes it starts.
+    previous = os.environ.get("GRASPSCAPE_YCB_DIR")
     os.environ["GRASPSCAPE_YCB_DIR"] = str(objects_dir / "ycb")
+    try:
+        return _run(opts, setting, objects_dir, say)
+    finally:
+        if previous is None:
+            os.environ.pop("GRASPSCAPE_YCB_DIR", None)
+        else:
+            os.environ["GRASPSCAPE_YCB_DIR"] = previous
+
+
+def _run(opts: AtlasOptions, setting: AtlasSetting, objects_dir: Path,
+         say: Callable[[str], None]) -> int:
+    from graspscape.services.local.atlas_site import write_site
+    from graspscape.services.local.explore import _free_port
+
     names = atlas_objects(objects_dir)
     if opts.only:
         names = [n for n in names if n in opts.only or short_name(n) in opts.only]
@@ -201,17 +248,7 @@ def run_atlas(opts: AtlasOptions) -> int:
                                             connect=[]))
     wire()
     engine, sessions = open_store(url)
-    dispatcher = supervisor = None
-    if local:
-        dispatcher = Dispatcher(settings, sessions)
-        dispatcher.start()
-        if not dispatcher.ready:
-            dispatcher.stop()
-            raise RuntimeError(f"could not open the zenoh peer on {endpoint}")
-        supervisor = Supervisor(WorkerConfig(connect=[endpoint], procs=opts.procs,
-                                             name="atlas"), log_level="warning")
-        supervisor.start()
-    poll = supervisor.poll if supervisor is not None else (lambda: None)
+    workers = _LocalWorkers(settings, sessions, endpoint, opts.procs) if local else None
     entries: list[AtlasEntry] = []
     started = time.monotonic()
     try:
@@ -225,15 +262,15 @@ def run_atlas(opts: AtlasOptions) -> int:
                                                 settings)
             say(f"[{i}/{len(names)}] {short_name(name)}: exploration {eid}"
                 + (" (done before, skipped)" if finished else ""))
-            row = _wait(sessions, eid, poll, say)
+            if not finished and workers is not None:
+                workers.start()  # only once something is left to explore
+            row = _wait(sessions, eid, workers.poll if workers else (lambda: None), say)
             entries.append(AtlasEntry(name=short_name(name), exploration_id=eid,
                                       skipped=finished, wall_s=_wall_s(row), status=row.status,
                                       poses=row.poses_done))
     finally:
-        if supervisor is not None:
-            supervisor.shutdown()
-        if dispatcher is not None:
-            dispatcher.stop()
+        if workers is not None:
+            workers.stop()
     explored_s = time.monotonic() - started
     say(f"explored {len(entries)} objects in {explored_s:.0f} s; writing the site ...")
     index = write_site(sessions, entries, opts.out.resolve(), setting, pictures=opts.pictures)
