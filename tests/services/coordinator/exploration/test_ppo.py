@@ -52,7 +52,7 @@ def _rows(sessions, eid: int) -> list[PoseRow]:
 def test_ppo_is_seeded_repeatable_in_rollouts_and_finds_held_grasps(sessions,
                                                                     named_object) -> None:
     object_id = named_object("sphere")
-    spec = _spec(object_id, poses=40, seed=3, batch=16, epochs=4, objective="mu_s")
+    spec = _spec(object_id, poses=40, seed=3, batch=16, epochs=2, objective="mu_s")
     eid, evaluated, stored = explore_with_oracle(sessions, spec)
     assert len(stored) == len(evaluated) == 40  # each pose once, the budget spent exactly
     rows = _rows(sessions, eid)
@@ -62,36 +62,38 @@ def test_ppo_is_seeded_repeatable_in_rollouts_and_finds_held_grasps(sessions,
     with sessions() as s:
         row = s.get(ExplorationRow, eid)
         assert (row.status, row.poses_done, row.poses_total) == ("done", 40, 40)
-        rounds = list(s.scalars(select(TileRow.round).where(TileRow.exploration_id == eid)))
-        per_round = {k: 0 for k in rounds}
+        per_round: dict[int, int] = {}
         for pose_row in rows:
-            per_round[s.get(TileRow, pose_row.tile_id).round] += 1
+            k = s.get(TileRow, pose_row.tile_id).round
+            per_round[k] = per_round.get(k, 0) + 1
     # Two rollouts of 16, trained on; the third cut to the 8 poses left of the budget.
     assert per_round == {0: 16, 1: 16, 2: 8}
-    # The same seed through other interleavings gives the same run; another seed another.
+    # The same seed through other interleavings gives the same run.
     _, _, again = explore_with_oracle(sessions, spec, workers=3, seed=9)
     assert again == stored
-    _, _, other = explore_with_oracle(sessions, _spec(object_id, poses=40, seed=4, batch=16,
-                                                      epochs=4, objective="mu_s"))
-    assert set(other).isdisjoint(stored)
+    # Another seed samples other poses from the start.
+    other = _spec(object_id, poses=40, seed=4, batch=16, epochs=2, objective="mu_s")
+    _, first = rollout(other, 0, lambda key: 0.0)
+    assert {p.key() for p in first}.isdisjoint(stored)
 
 
 @needs_rl
+@pytest.mark.slow  # the default run has one PPO test: torch's import alone is seconds
 def test_resuming_the_kept_search_equals_replaying_from_the_seed() -> None:
     spec = ExplorationSpec(object_id=1, grid=GRID,
-                           strategy={"name": "ppo", "poses": 10_000, "seed": 4, "batch": 8,
-                                     "epochs": 2})
+                           strategy={"name": "ppo", "poses": 10_000, "seed": 4, "batch": 4,
+                                     "epochs": 1})
     rng = np.random.default_rng(0)
     stored: dict[str, float] = {}
-    for g in range(4):
+    for g in range(3):
         k, poses = rollout(spec, g, lambda key: stored.get(key, 0.0), cache_key="t")
         fresh = rollout(spec, g, lambda key: stored.get(key, 0.0))
         assert (k, [p.key() for p in poses]) == (fresh[0], [p.key() for p in fresh[1]])
         stored.update((p.key(), float(rng.uniform())) for p in poses)
     # A stored reward other than the one the kept search was told: replayed, not resumed.
     stored[next(iter(stored))] += 0.5
-    _, poses = rollout(spec, 4, lambda key: stored.get(key, 0.0), cache_key="t")
-    _, fresh = rollout(spec, 4, lambda key: stored.get(key, 0.0))
+    _, poses = rollout(spec, 3, lambda key: stored.get(key, 0.0), cache_key="t")
+    _, fresh = rollout(spec, 3, lambda key: stored.get(key, 0.0))
     assert [p.key() for p in poses] == [p.key() for p in fresh]
 
 
