@@ -215,6 +215,39 @@ def open_fds(pid: int) -> int | None:
         return None
 
 
+def fd_kinds(pid: int) -> dict[str, int]:
+    """Open file descriptors by kind: socket, pipe, anon_inode:[eventfd], a file's path."""
+    kinds: dict[str, int] = {}
+    try:
+        names = os.listdir(f"/proc/{pid}/fd")
+    except OSError:
+        return kinds
+    for name in names:
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{name}")
+        except OSError:
+            continue
+        kind = target.split(":[")[0] if ":[" in target else target
+        kinds[kind] = kinds.get(kind, 0) + 1
+    return kinds
+
+
+def zenoh_shm_segments() -> dict[str, int]:
+    """zenoh's shared-memory segments in /dev/shm (name → bytes in use)."""
+    found = {}
+    for path in glob("/dev/shm/*.zenoh"):
+        try:
+            found[path] = os.stat(path).st_blocks * 512
+        except OSError:
+            continue
+    return found
+
+
+def in_use(path: str) -> bool:
+    """Whether any process has the file open or mapped."""
+    return subprocess.run(["fuser", "-s", path], capture_output=True).returncode == 0
+
+
 def threads(pid: int) -> int | None:
     try:
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
