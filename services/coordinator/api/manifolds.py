@@ -197,11 +197,13 @@ def best(
     poses = []
     for row, ev in zip(rows, evidence, strict=True):
         sc = ev.score
+        stored = PoseOut.model_validate(row).model_dump()
+        # The scores at the δ of the request, not the stored ones of the finest step.
+        stored.update(robust_s=sc.s if sc else None, robust_q=sc.q if sc else None,
+                      robust_label=sc.label.value if sc else None)
         poses.append(BestPose(
-            **PoseOut.model_validate(row).model_dump(),
-            robust_s=sc.s if sc else None, robust_s_low=sc.s_low if sc else None,
-            robust_s_high=sc.s_high if sc else None, robust_q=sc.q if sc else None,
-            robust_label=sc.label.value if sc else None,
+            **stored,
+            robust_s_low=sc.s_low if sc else None, robust_s_high=sc.s_high if sc else None,
             evidence=CertificationEvidence(
                 neighbours=ev.neighbours, neighbours_known=ev.neighbours_known,
                 neighbours_evaluated=ev.neighbours_evaluated,

@@ -137,6 +137,14 @@ class PoseOut(PoseValues):
     error: str | None = Field(
         default=None, description="outcome `error` only: what the evaluation of this pose "
         "raised")
+    # The robust map at the finest step (manifolds/robust.py); null until the manifolds were
+    # computed with this pose stored, and for poses off the lattice.
+    robust_s: float | None = Field(default=None, description="robust success s_δ")
+    robust_q: float | None = Field(default=None, description="robust quality q_δ")
+    robust_label: str | None = Field(default=None, description="robust, fragile, futile or "
+                                     "uncertain")
+    certifies: str | None = Field(default=None, description="the key of the pose whose "
+                                  "certification this evaluation serves")
 
 
 class PoseFilter(BaseModel):

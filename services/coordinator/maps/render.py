@@ -196,8 +196,12 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
             ax.contourf(X, Y, np.ma.masked_invalid(uncertain), levels=[0.5, 1.5],
                         colors=["0.55"], alpha=0.45, zorder=2)
         if np.isfinite(fragile).any():
-            ax.contourf(X, Y, np.ma.masked_invalid(fragile), levels=[0.5, 1.5],
-                        colors="none", hatches=[".."], zorder=2)
+            # A sparse grey stipple: on a fractal map most of the cut is fragile, and the
+            # manifolds' colours and the μs contours must stay readable under it.
+            dots = ax.contourf(X, Y, np.ma.masked_invalid(fragile), levels=[0.5, 1.5],
+                               colors="none", hatches=["."], zorder=2)
+            dots.set_edgecolor("0.35")
+            dots.set_linewidth(0.0)
     outline = _section(mesh, e1, e2)
     if len(outline):
         ax.add_collection(LineCollection(outline, colors="0.2", linewidths=1.6, zorder=4))
@@ -271,14 +275,28 @@ def render_map(
               f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     _draw_3d(ax3, lattice, points, mesh)
-    shown = manifolds[:LEGEND_ENTRIES]
+    large = [m for m in manifolds if m.large]
+    dust = [m for m in manifolds if not m.large]
+    shown = large[:LEGEND_ENTRIES]
     handles = [plt.Rectangle((0, 0), 1, 1, color=_COLOURS[m.label % 10], alpha=0.6) for m in shown]
     names = [f"{m.name}: {m.pose_count} poses, {m.volume_cm3:.0f} cm³, mean μs {m.mu_s_mean:.2f}"
              for m in shown]
-    if len(manifolds) > len(shown):
-        rest = manifolds[len(shown):]
+    if len(large) > len(shown):
+        rest = large[len(shown):]
         handles.append(plt.Rectangle((0, 0), 1, 1, color="white"))
         names.append(f"+{len(rest)} smaller ({sum(m.volume_cm3 for m in rest):.0f} cm³)")
+    if dust:
+        handles.append(plt.Rectangle((0, 0), 1, 1, color="white"))
+        names.append(f"dust: {len(dust)} manifolds under 1 % "
+                     f"({sum(m.volume_cm3 for m in dust):.0f} cm³)")
+    robust = field.get("robust")
+    if robust is not None and (robust == ROBUST_CODES["fragile"]).any():
+        handles.append(plt.Rectangle((0, 0), 1, 1, facecolor="white", edgecolor="0.35",
+                                     hatch="..", linewidth=0.5))
+        names.append("fragile (0.1 < s_δ < 0.9)")
+    if robust is not None and (robust == ROBUST_CODES["uncertain"]).any():
+        handles.append(plt.Rectangle((0, 0), 1, 1, color="0.55", alpha=0.45))
+        names.append("uncertain (neighbours unknown)")
     if handles:
         fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), fontsize=8)
     fig.tight_layout(rect=(0, 0.08, 1, 1))

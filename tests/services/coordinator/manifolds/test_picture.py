@@ -194,5 +194,5 @@ def test_the_cut_carries_the_robust_labels_and_shades_them() -> None:
         return out
 
     shades = drawn(field)
-    assert len(shades) == 2 and [list(c.hatches) for c in shades] == [[None], [".."]]
+    assert len(shades) == 2 and [list(c.hatches) for c in shades] == [[None], ["."]]
     assert drawn({**field, "robust": np.zeros_like(field["robust"])}) == []

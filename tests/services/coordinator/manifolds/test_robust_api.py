@@ -167,4 +167,6 @@ def _check_table(client: TestClient, sessions, explored: tuple[int, str, str]) -
         labels = dict(s.execute(select(PoseRow.pose_key, PoseRow.robust_label)
                                 .where(PoseRow.exploration_id == eid)).all())
     assert labels[north] == "robust" and labels[south] in ("fragile", "futile")
+    listed = client.get(f"/explorations/{eid}/poses", params={"limit": 1000}).json()["items"]
+    assert {p["pose_key"]: p["robust_label"] for p in listed} == labels
     assert set(labels.values()) <= {"robust", "fragile", "futile"}  # a dense map: no unknowns
