@@ -120,6 +120,13 @@ SIZES = {
                   table2_grid=PoseGrid(theta_cells=2, phi_cells=2, gap_step_m=0.02,
                                        max_gap_m=0.02),
                   effort_tolerance_nm=0.1),
+    # Twice the directions, two start gaps, one refinement level and three times the budget
+    # of `small`: about 40 min at load 20 on 2 cores.
+    "medium": Size(dtheta_deg=60, r_min=0.005, r_max=0.02, dr=0.015, levels=1, refine_max=24,
+                   search_rounds=1, budget=48, ppo_batch=16, ppo_seeds=3,
+                   table2_grid=PoseGrid(theta_cells=3, phi_cells=3, gap_step_m=0.02,
+                                        max_gap_m=0.02),
+                   effort_tolerance_nm=0.1),
     "full": Size(dtheta_deg=30, r_min=0.0, r_max=0.03, dr=0.01, levels=1, refine_max=5000,
                  search_rounds=3, budget=2000, ppo_batch=64, ppo_seeds=3,
                  table2_grid=compare_policies.GRIDS["paper"], effort_tolerance_nm=0.02),
