@@ -1,0 +1,370 @@
+"""Read latency of the map routes on large explorations, under 8 concurrent clients.
+
+Each exploration is built through the real ingest path (`lease_tiles` + `ingest_results`, the
+grid strategy on a real lattice), with `tests.factories.oracle_result`'s results (two grasp types
+split at φ = π, realistic signatures: three contacts, nine joint angles, a grasp configuration)
+plus, on held poses, the static metrics and robustness margins a default exploration stores
+(deterministic per pose key), so the default `/best` ranking (torque margin ratio) has values to
+sort. The manifold table is then stored as `bench_reads.store_manifolds` does (the oracle's split;
+grouping a million poses is issue 21's incremental-manifold work, not a read).
+
+The coordinator runs as a real `uvicorn` server in a subprocess (one process, FastAPI's thread
+pool for the sync routes); 8 client threads (httpx, one connection each) in this process send
+each route's requests as fast as answers come. Per route: p50/p95/p99 latency in ms. `map.png`
+is cached per map version, so its first (cold) request is reported apart from the warm ones; the
+CSV export is timed to its first body byte. Sizes: 10k, 100k, 1m poses (`--sizes`,
+`--pg-sizes`). Databases are kept (SQLite files under `--keep`, PostgreSQL schemas
+`q_<size>` in database `bench_query`) and reused, migrated to head before measuring, so a
+rerun after a migration measures the same rows. Writes benchmarks/results/query.json.
+
+    .venv/bin/python benchmarks/bench_query.py [--sizes 10k,100k] [--pg-sizes 10k,100k]
+        [--keep DIR] [--rebuild]
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import random
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import psycopg
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
+
+from benchmarks._results import write_results  # noqa: E402
+
+# Coarse Δθ giving about this many poses with 6 r levels and 4 rolls.
+SIZES = {"10k": 0.174, "100k": 0.056, "1m": 0.017}
+TILE_POSES = 2000
+CLIENTS = 8
+PG_ADMIN = "postgresql://postgres@127.0.0.1:5432/postgres"
+PG_DB = "bench_query"
+DEFAULT_KEEP = Path("/tmp/graspscape_bench_query")
+
+
+def _unit(key: str, salt: str) -> float:
+    """A deterministic number in [0, 1) per pose key (the same rows on every build)."""
+    digest = hashlib.blake2b(f"{salt}:{key}".encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "big") / 2**64
+
+
+def bench_result(pose):  # type: ignore[no-untyped-def]
+    """`oracle_result` with what a default exploration also stores on a held pose."""
+    from graspscape.shared.specs.results import RobustnessReport
+
+    from tests.factories import oracle_result
+
+    result = oracle_result(pose)
+    key = result.pose_key
+    extra: dict[str, object] = {"effective_r": pose.r, "eval_time_s": 0.3 + _unit(key, "t")}
+    if result.viable:
+        margin = 0.2 + 2.0 * _unit(key, "tm")
+        extra.update(
+            contacts_per_link={"A_3": 1, "B_3": 1, "C_3": 1},
+            mu_g=0.05 * _unit(key, "g"), mu_f=0.02 * _unit(key, "f"), mu_m=3 * _unit(key, "m"),
+            robustness=RobustnessReport(
+                torque_margin_nm=margin, torque_margin_ratio=1.0 - margin / 2.5,
+                friction_margin=0.1 + _unit(key, "fm"),
+                gravity_test_share=round(6 * _unit(key, "gt")) / 6,
+                force_test_share=round(6 * _unit(key, "ft")) / 6,
+                tug_force_n=20 * _unit(key, "tug"), shake_survival_s=2 * _unit(key, "sh")))
+    return result.model_copy(update=extra)
+
+
+REVISION = "head"  # --revision: the schema the databases are migrated to
+
+
+def build(url: str, dtheta: float) -> tuple[int, float]:
+    """An exploration of the grid made through the real ingest; (poses, ingest seconds)."""
+    from graspscape.services.coordinator import db
+    from graspscape.services.coordinator.exploration.scheduler import ingest_results
+    from graspscape.services.coordinator.exploration.service import create_exploration
+    from graspscape.services.coordinator.store.models import ObjectRow
+    from graspscape.services.coordinator.store.queue import lease_tiles
+    from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
+
+    from benchmarks.bench_reads import store_manifolds
+
+    db.upgrade(url, REVISION)
+    engine = db.make_engine(url)
+    sessions = db.make_sessionmaker(engine)
+    grid = PoseGridSpec(dtheta=dtheta, r_min=0.0, r_max=0.05, dr=0.01, attitudes={"rolls": 4})
+    with sessions() as s:
+        obj = ObjectRow(kind="named", name="sphere", properties={})
+        s.add(obj)
+        s.commit()
+        spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid,
+                               strategy={"name": "grid"}, refinement={"levels": 0})
+        eid = create_exploration(s, spec=spec, tile_target_poses=TILE_POSES,
+                                 max_poses=10**7).id
+    assert eid == 1, "a fresh database: the exploration measured is id 1"
+    poses, busy = 0, 0.0
+    with sessions() as s:
+        while tiles := lease_tiles(s, worker_id="bench", n=8, lease_seconds=3600):
+            for tile in tiles:
+                results = [bench_result(p) for p in tile.poses()]
+                start = time.perf_counter()
+                poses += ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                                        worker_id="bench", results=results).inserted
+                busy += time.perf_counter() - start
+        store_manifolds(s, eid)
+        store_robust_scores(s, eid)
+    engine.dispose()
+    return poses, busy
+
+
+def store_robust_scores(session, eid: int) -> None:  # type: ignore[no-untyped-def]
+    """Robust scores on the viable poses, as the manifold refresh stores them (issue 18's
+    columns): 60 % robust, 20 % uncertain, 15 % fragile, 5 % futile by row id, q ≤ μs."""
+    from graspscape.services.coordinator.store.models import PoseRow
+    from sqlalchemy import case, update
+
+    k = PoseRow.id % 20
+    label = case((k < 12, "robust"), (k < 16, "uncertain"), (k < 19, "fragile"),
+                 else_="futile")
+    session.execute(update(PoseRow).where(PoseRow.exploration_id == eid, PoseRow.viable)
+                    .values(robust_label=label, robust_s=0.05 * k,
+                            robust_q=PoseRow.mu_s * (0.5 + 0.025 * k))
+                    .execution_options(synchronize_session=False))
+    session.commit()
+
+
+def _pose_count(url: str) -> int:
+    from graspscape.services.coordinator import db
+    from graspscape.services.coordinator.store.models import ExplorationRow
+
+    engine = db.make_engine(url)
+    try:
+        with db.make_sessionmaker(engine)() as s:
+            row = s.get(ExplorationRow, 1)
+            return 0 if row is None or not row.manifolds_final else row.poses_done
+    except Exception:  # no tables yet
+        return 0
+    finally:
+        engine.dispose()
+
+
+# --- the server ------------------------------------------------------------------------------
+def serve(url: str, port: int) -> None:
+    """The coordinator's app under uvicorn, as `graspscape serve` runs it (zenoh off)."""
+    import uvicorn
+    from graspscape.services.coordinator.app import create_app
+    from graspscape.services.coordinator.settings import Settings
+
+    settings = Settings(database={"url": url})
+    uvicorn.run(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Server:
+    def __init__(self, url: str) -> None:
+        self.port = _free_port()
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.proc = subprocess.Popen([sys.executable, __file__, "--serve", url, str(self.port)],
+                                     cwd=REPO)
+
+    def __enter__(self) -> Server:
+        import httpx
+
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                # Any answer: a database kept at an older --revision answers 503 here.
+                if httpx.get(f"{self.base}/healthz", timeout=2).status_code:
+                    return self
+            except httpx.HTTPError:
+                time.sleep(0.2)
+        raise RuntimeError("the coordinator did not start")
+
+    def cpu_s(self) -> float:
+        """User + system CPU seconds the server process has used so far."""
+        fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    def __exit__(self, *exc: object) -> None:
+        self.proc.terminate()
+        self.proc.wait(timeout=30)
+
+
+# --- the clients -----------------------------------------------------------------------------
+def routes(eid: int, max_id: int) -> dict[str, tuple[object, int]]:
+    """Route name → (path or a function of a Random giving one, requests per client)."""
+    base = f"/explorations/{eid}"
+    return {
+        "best": (f"{base}/best?limit=5", 6),
+        "best_mu_s": (f"{base}/best?limit=5&rank=mu_s", 6),
+        "best_torque_margin_ratio": (f"{base}/best?limit=5&rank=torque_margin_ratio", 6),
+        "best_manifold": (f"{base}/best?limit=5&manifold=B", 6),
+        "best_effort": (f"{base}/best?limit=5&max_effort_nm=2.0", 6),
+        "best_cone": (f"{base}/best?limit=5&cone_x=0&cone_y=1&cone_z=0&cone_half_angle_deg=30",
+                      6),
+        "manifolds": (f"{base}/manifolds", 6),
+        "manifold_label": (f"{base}/manifolds/A", 6),
+        "poses_page": (lambda rng: f"{base}/poses?limit=100&cursor={rng.randrange(max_id)}", 6),
+        "poses_viable_page": (
+            lambda rng: f"{base}/poses?limit=100&viable=true&cursor={rng.randrange(max_id)}", 6),
+        "map_png": (f"{base}/map.png", 2),
+        "csv_first_byte": (f"{base}/export/poses.csv", 1),
+    }
+
+
+def _one(client, path: str, first_byte: bool) -> float:  # type: ignore[no-untyped-def]
+    start = time.perf_counter()
+    if first_byte:
+        with client.stream("GET", path) as response:
+            response.raise_for_status()
+            if next(response.iter_raw(), None) is None:
+                raise RuntimeError(f"{path}: an empty body")
+    else:
+        response = client.get(path)
+        response.raise_for_status()
+    return (time.perf_counter() - start) * 1000
+
+
+def run_route(base: str, name: str, path: object, per_client: int) -> list[float]:
+    """`per_client` requests from each of CLIENTS threads at once; latencies in ms."""
+    import httpx
+
+    latencies: list[float] = []
+    errors: list[BaseException] = []
+    lock = threading.Lock()
+    go = threading.Barrier(CLIENTS)
+
+    def client_loop(seed: int) -> None:
+        rng = random.Random(seed)
+        try:
+            with httpx.Client(base_url=base, timeout=600) as client:
+                go.wait()
+                for _ in range(per_client):
+                    p = path(rng) if callable(path) else path
+                    ms = _one(client, str(p), name == "csv_first_byte")
+                    with lock:
+                        latencies.append(ms)
+        except BaseException as exc:  # reported after the join
+            errors.append(exc)
+
+    threads = [threading.Thread(target=client_loop, args=(i,)) for i in range(CLIENTS)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    if errors:
+        raise errors[0]
+    return latencies
+
+
+def measure(url: str, tag: str, figures: dict[str, float]) -> None:
+    import httpx
+    from graspscape.services.coordinator import db
+    from graspscape.services.coordinator.store.models import PoseRow
+    from sqlalchemy import func, select
+
+    db.upgrade(url, REVISION)  # a kept database gets the indexes of later migrations
+    engine = db.make_engine(url)
+    with db.make_sessionmaker(engine)() as s:
+        max_id = s.scalar(select(func.max(PoseRow.id))) or 1
+    engine.dispose()
+    with Server(url) as server:
+        # Cold map.png: the first drawing of this map version in this process.
+        start = time.perf_counter()
+        httpx.get(f"{server.base}/explorations/1/map.png", timeout=600).raise_for_status()
+        figures[f"map_png_cold_ms_{tag}"] = round((time.perf_counter() - start) * 1000, 1)
+        for name, (path, per_client) in routes(1, max_id).items():
+            cpu = server.cpu_s()
+            try:
+                ms = np.array(run_route(server.base, name, path, per_client))
+            except Exception as exc:  # reported in the results, the other routes still run
+                print(f"{tag} {name}: failed: {exc!r}", flush=True)
+                figures[f"{name}_failed_{tag}"] = 1
+                continue
+            # The server's CPU time per request: what a route costs, whatever else runs here.
+            figures[f"{name}_server_cpu_ms_per_request_{tag}"] = round(
+                (server.cpu_s() - cpu) * 1000 / len(ms), 2)
+            for q in (50, 95, 99):
+                figures[f"{name}_p{q}_ms_{tag}"] = round(float(np.percentile(ms, q)), 1)
+            print(f"{tag} {name}: p50 {np.percentile(ms, 50):.1f} p95 "
+                  f"{np.percentile(ms, 95):.1f} p99 {np.percentile(ms, 99):.1f} ms", flush=True)
+
+
+def _pg_url(size: str, rebuild: bool) -> str:
+    with psycopg.connect(PG_ADMIN, autocommit=True) as conn:
+        if not conn.execute("SELECT 1 FROM pg_database WHERE datname = %s", (PG_DB,)).fetchone():
+            conn.execute(f'CREATE DATABASE "{PG_DB}"')
+    schema = f"q_{size}"
+    with psycopg.connect(PG_ADMIN.rsplit("/", 1)[0] + f"/{PG_DB}", autocommit=True) as conn:
+        if rebuild:
+            conn.execute(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE')
+        conn.execute(f'CREATE SCHEMA IF NOT EXISTS "{schema}"')
+    return (f"postgresql+psycopg://postgres@127.0.0.1:5432/{PG_DB}"
+            f"?options=-csearch_path%3D{schema}")
+
+
+def _load() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", default="10k,100k", help="SQLite sizes (10k, 100k, 1m)")
+    parser.add_argument("--pg-sizes", default="10k,100k", help="PostgreSQL sizes")
+    parser.add_argument("--keep", type=Path, default=DEFAULT_KEEP,
+                        help="where the SQLite databases are kept and reused")
+    parser.add_argument("--rebuild", action="store_true", help="build again even if kept")
+    parser.add_argument("--revision", default="head",
+                        help="migrate to this revision (e.g. 0010: before the query indexes)")
+    parser.add_argument("--serve", nargs=2, metavar=("URL", "PORT"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.serve:
+        serve(args.serve[0], int(args.serve[1]))
+        return 0
+
+    global REVISION
+    REVISION = args.revision
+    figures: dict[str, float] = {"clients": CLIENTS, "load_avg_1min_start": _load()}
+    targets: list[tuple[str, str, str]] = []
+    args.keep.mkdir(parents=True, exist_ok=True)
+    for size in filter(None, args.sizes.split(",")):
+        path = args.keep / f"query_{size}.db"
+        if args.rebuild and path.exists():
+            path.unlink()
+        targets.append((size, f"sqlite:///{path}", f"{size}_sqlite"))
+    for size in filter(None, args.pg_sizes.split(",")):
+        targets.append((size, _pg_url(size, args.rebuild), f"{size}_pg"))
+    for size, url, tag in targets:
+        poses = _pose_count(url)
+        if poses == 0:
+            if url.startswith("sqlite"):
+                Path(url.removeprefix("sqlite:///")).unlink(missing_ok=True)
+            else:
+                url = _pg_url(size, True)
+            poses, seconds = build(url, SIZES[size])
+            figures[f"ingest_poses_per_s_{tag}"] = round(poses / seconds)
+            print(f"{tag}: {poses} poses ingested in {seconds:.0f} s", flush=True)
+        figures[f"poses_{tag}"] = poses
+        measure(url, tag, figures)
+        figures[f"load_avg_1min_after_{tag}"] = _load()
+    write_results("query", figures, extra={"note": (
+        "uvicorn in a subprocess (one process, FastAPI's thread pool), 8 httpx client threads "
+        "in the bench process on the same machine; map_png percentiles are warm (cached per "
+        "map version) after the cold first request; csv_first_byte to the first body byte; "
+        "ingest_poses_per_s only where this run built the database (results made outside the "
+        "timing); math.pi split: manifold A = φ < π")})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
