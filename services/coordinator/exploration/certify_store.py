@@ -62,9 +62,12 @@ def certification_plans(session: Session, exploration_id: int) -> dict[str, int]
 
 
 def pose_of_key(key: str) -> Pose:
-    """The pose a pose key stands for (to its six decimals)."""
+    """The pose a pose key stands for (to its six decimals; θ = π is written 3.141593,
+    which is beyond π, so θ is clipped back)."""
     theta, phi, r, roll, pitch, yaw = (float(x) for x in key.split("/"))
-    return Pose(theta=theta, phi=phi, r=r, roll=roll, pitch=pitch, yaw=yaw)
+    return Pose(theta=min(max(theta, 0.0), math.pi), phi=phi, r=min(max(r, 0.0), 1.0),
+                roll=roll, pitch=min(max(pitch, -math.pi), math.pi),
+                yaw=min(max(yaw, -math.pi / 2), math.pi / 2))
 
 
 def _keys_of_ids(session: Session, ids: set[int]) -> dict[int, str]:

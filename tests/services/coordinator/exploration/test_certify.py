@@ -118,6 +118,12 @@ def test_plan_completes_the_robust_best_first_then_jitters_it_within_budget() ->
     assert (ev.known, ev.held, ev.jitters_held, ev.certified) == (len(hood), 0, 4, False)
 
 
+def test_a_pose_key_reads_back_as_its_lattice_point_even_at_the_poles() -> None:
+    # θ = π is written 3.141593 in a key, beyond π: read back, it is still the south pole.
+    for p in (Point(0, 0, 0, 0), Point(LATTICE.n_rings, 0, 2, 0), LONE):
+        assert LATTICE.point(pose_of_key(LATTICE.pose(p).key())) == p
+
+
 def test_budget_is_a_share_of_the_other_planned_poses_split_over_large_manifolds() -> None:
     assert certify.budgets(CertificationSpec(), 1000, 3) == (50, 16)
     assert certify.budgets(CertificationSpec(share=0.0), 1000, 3) == (0, 0)
