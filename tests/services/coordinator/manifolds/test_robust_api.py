@@ -167,6 +167,13 @@ def _check_table(client: TestClient, sessions, explored: tuple[int, str, str]) -
         labels = dict(s.execute(select(PoseRow.pose_key, PoseRow.robust_label)
                                 .where(PoseRow.exploration_id == eid)).all())
     assert labels[north] == "robust" and labels[south] in ("fragile", "futile")
+    # A refresh rewrites only the scores that changed: none, the poses being the same.
+    from graspscape.services.coordinator.manifolds import service
+
+    with sessions() as s:
+        computed = service.compute_map(s, eid)
+        assert len(computed.map.robust) == len(labels)
+        assert service.store_robust_scores(s, eid, computed.map.robust) == 0
     listed = client.get(f"/explorations/{eid}/poses", params={"limit": 1000}).json()["items"]
     assert {p["pose_key"]: p["robust_label"] for p in listed} == labels
     assert set(labels.values()) <= {"robust", "fragile", "futile"}  # a dense map: no unknowns
