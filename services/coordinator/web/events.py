@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import threading
 from collections.abc import AsyncIterator
 from datetime import timedelta
 from typing import Annotated, Any
@@ -31,6 +32,32 @@ from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 router = APIRouter(include_in_schema=False)
+
+# Set when uvicorn is told to exit. Uvicorn's graceful shutdown waits for every response to
+# end, and an event stream never does: one open viewer tab kept `graspscape serve` from
+# exiting on SIGTERM/Ctrl-C (measured: still up 40 s later). The streams end on this instead.
+# Uvicorn offers no hook for it, so its signal handler is wrapped, as sse-starlette does.
+_shutting_down = threading.Event()
+
+
+def _watch_server_exit() -> None:
+    try:
+        from uvicorn.server import Server
+    except ImportError:  # served otherwise: streams end when clients go
+        return
+    original = Server.handle_exit
+    if getattr(original, "graspscape_watched", False):
+        return
+
+    def handle_exit(self: Any, sig: int, frame: Any) -> None:
+        _shutting_down.set()
+        original(self, sig, frame)
+
+    handle_exit.graspscape_watched = True  # type: ignore[attr-defined]
+    Server.handle_exit = handle_exit  # type: ignore[method-assign]
+
+
+_watch_server_exit()
 
 CONNECTED_WITHIN_S = 30.0  # a worker heard from this recently counts as connected
 LIST_LIMIT = 50
@@ -109,7 +136,10 @@ async def _events(request: Request, interval_s: float, max_events: int | None
                 return
         else:
             yield ": idle\n\n"
-        await asyncio.sleep(interval_s)
+        for _ in range(max(1, round(interval_s / 0.2))):  # wake often enough to end soon
+            await asyncio.sleep(min(interval_s, 0.2))
+            if _shutting_down.is_set():
+                return
         if await request.is_disconnected():
             return
 

@@ -44,9 +44,11 @@ def _command(*args: str) -> list[str]:
 
 
 class LiveStack:
-    """Coordinator + one worker with `procs` processes; `stop()` ends both (SIGTERM)."""
+    """Coordinator + one worker with `procs` processes (none with 0); `stop()` ends both
+    (SIGTERM)."""
 
     def __init__(self, data_dir: Path, *, procs: int = 1, tile_target_poses: int = 4) -> None:
+        self.worker: subprocess.Popen[bytes] | None = None
         self.port, zport = free_port(), free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         endpoint = f"tcp/127.0.0.1:{zport}"
@@ -60,6 +62,8 @@ class LiveStack:
                      "--zenoh-listen", endpoint, "--log-level", "warning"),
             cwd=REPO, env=env, stdout=self.log, stderr=subprocess.STDOUT)
         self._wait_healthy()
+        if procs == 0:
+            return
         self.worker = subprocess.Popen(
             _command("worker", "--connect", endpoint, "--procs", str(procs), "--name", "web",
                      "--log-level", "warning"),
@@ -104,7 +108,7 @@ class LiveStack:
         raise TimeoutError(f"exploration {exploration_id} not finished in {timeout_s:.0f} s")
 
     def stop(self) -> None:
-        for proc in (getattr(self, "worker", None), self.coordinator):
+        for proc in (self.worker, self.coordinator):
             if proc is None or proc.poll() is not None:
                 continue
             proc.send_signal(signal.SIGTERM)

@@ -6,6 +6,7 @@ exploration; the workers page lists the worker; and no page logs a console error
 from __future__ import annotations
 
 import re
+import signal
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -143,3 +144,21 @@ def test_screenshots(stack: LiveStack, sphere: dict[str, Any], page: tuple[Any, 
     files = shoot(p, stack.base, sphere["id"], tmp_path)
     assert len(files) == 4 and all(f.stat().st_size > 10_000 for f in files)
     assert console.errors == []
+
+
+def test_open_event_stream_does_not_hold_up_shutdown(tmp_path: Path) -> None:
+    """Uvicorn's graceful exit waits for open responses; an event stream must end on SIGTERM
+    (before the fix, one open viewer tab kept the coordinator up for good)."""
+    import httpx
+
+    live = LiveStack(tmp_path, procs=0)
+    try:
+        with httpx.stream("GET", live.base + "/events/explorations", timeout=30) as r:
+            assert r.status_code == 200
+            next(r.iter_lines())  # the stream is open
+            started = time.monotonic()
+            live.coordinator.send_signal(signal.SIGTERM)
+            live.coordinator.wait(15)
+            assert time.monotonic() - started < 10
+    finally:
+        live.stop()
