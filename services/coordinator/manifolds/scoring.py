@@ -9,9 +9,9 @@ quality, labels and cores come from manifolds/robust.py. The scores:
   by the poses the run *claims* as core — a pose and its whole N_δ held by the run (evaluated
   or inferred) and in one run manifold — and the share of the claimed volume outside the dense
   core.
-- T2 best robust grasp: the run's pick p̂ is its robust-labelled pose of highest robust quality
-  q_δ with unknown neighbours counted as failures (`q_low`; its highest q_low if it labels none
-  robust), scored on the dense grid: regret
+- T2 best robust grasp: the run's pick p̂ is the robust best it returns (`summary.robust_order`:
+  robust before uncertain before fragile, then the highest q_δ over the known members, as
+  `/best` ranks), scored on the dense grid: regret
   max q_δ − q_δ(p̂), membership of the dense top 5 % by q_δ (over every finest point, ties
   included), s_δ(p̂). Per large dense manifold the same within it, the run's pick taken from
   the run manifold matched to it (none matched: not found, regret counted as the manifold's
@@ -46,6 +46,7 @@ from graspscape.services.coordinator.manifolds.robust import (
     large_manifolds,
     score,
 )
+from graspscape.services.coordinator.manifolds.summary import robust_order
 
 TOP_SHARE = 0.05  # T2: the dense top 5 % by q_δ
 FOUND_COVER = 0.5  # T3: a matched run manifold covering this share of a dense one finds it
@@ -251,19 +252,13 @@ def alphas(shares: Mapping[int, float]) -> dict[int, float]:
             if level - 1 in shares and shares[level] > 0 and shares[level - 1] > 0}
 
 
-def q_low(score: RobustScore) -> float:
-    """Robust quality with every unknown member of N_δ ∪ {p} counted as a failure: the run
-    cannot claim more for a pose whose neighbourhood it has not seen."""
-    return score.q * score.known / score.total
-
-
-def _pick(scores: Mapping[Point, RobustScore], among: Iterable[Point]) -> Point | None:
-    """The run's robust best among `among`: highest q_low of those labelled robust, else
-    highest q_low (ties: the smaller point)."""
+def _pick(scores: Mapping[Point, RobustScore], samples: Mapping[Point, StoredPose],
+          among: Iterable[Point]) -> Point | None:
+    """The robust best the run returns among `among`: first by `summary.robust_order` (robust,
+    uncertain, fragile, futile; then q_δ over the known members, μs, key), as `/best` and the
+    manifold table rank."""
     pool = [p for p in among if p in scores]
-    robust = [p for p in pool if scores[p].label is RobustLabel.ROBUST]
-    pool = robust or pool
-    return min(pool, key=lambda p: (-q_low(scores[p]), p)) if pool else None
+    return min(pool, key=lambda p: robust_order(samples[p], scores[p])) if pool else None
 
 
 def _top_threshold(values: list[float]) -> float:
@@ -298,7 +293,7 @@ def score_run(lattice: Lattice, weights: Mapping[Point, float], dense: MapLabels
 
     # T2
     q_dense = {p: dense_scores[p].q for p in points}
-    pick = _pick(run_scores, run_scores)
+    pick = _pick(run_scores, run.samples, run_scores)
     best_q = max(q_dense.values(), default=0.0)
     threshold = _top_threshold(list(q_dense.values()))
     dense_members = _members(dense.labels)
@@ -312,7 +307,7 @@ def score_run(lattice: Lattice, weights: Mapping[Point, float], dense: MapLabels
         members = dense_members[label]
         best_here = max(q_dense[p] for p in members)
         a = matched.get(label)
-        chosen = None if a is None else _pick(run_scores, run_members[a[0]])
+        chosen = None if a is None else _pick(run_scores, run.samples, run_members[a[0]])
         if chosen is None:
             regrets.append(best_here)
             continue
