@@ -6,6 +6,8 @@ second, the cost of a held grasp, steps and time by phase, and the share of outc
 or not, and the same grasp type) on which both agree.
 
     .venv/bin/python benchmarks/bench_eval_pose.py            # writes results/eval_pose.json
+    .venv/bin/python benchmarks/bench_eval_pose.py --scaling-only --procs 1,2,4,8,16
+                                                  # 16-core scaling: eval_pose_scaling.json
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -41,20 +44,85 @@ def pose_grid() -> list[Pose]:
     return [Pose(theta=t, phi=f, r=0.02, roll=a) for t in thetas for f in phis for a in rolls]
 
 
+class StepClock:
+    """Time spent inside pybullet.stepSimulation (wall and CPU), while installed: the engine's
+    share of an evaluation, and the floor a zero-cost Python side would reach."""
+
+    def __init__(self) -> None:
+        self.wall_s = self.cpu_s = 0.0
+        self.steps = 0
+        self._step = p.stepSimulation
+
+    def __enter__(self) -> StepClock:
+        step = self._step
+
+        def timed(*args, **kwargs):  # type: ignore[no-untyped-def]
+            wall, cpu = time.perf_counter(), time.process_time()
+            step(*args, **kwargs)
+            self.cpu_s += time.process_time() - cpu
+            self.wall_s += time.perf_counter() - wall
+            self.steps += 1
+
+        p.stepSimulation = timed  # every caller looks it up on the module at each call
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        p.stepSimulation = self._step
+
+
 def run(obj: ObjectSpec, settings: SimSettings, poses: list[Pose],
         world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
-        engine: dict | None = None) -> tuple[list[PoseResult], float]:
+        engine: dict | None = None,
+        clock: dict[str, float] | None = None) -> tuple[list[PoseResult], float]:
     """The grid's results and their wall time on one warm evaluator. `engine`: pybullet
-    engine parameters beyond SimSettings (set once: they outlive restoreState)."""
+    engine parameters beyond SimSettings (set once: they outlive restoreState). `clock`:
+    filled with the CPU time of the grid and the wall and CPU time inside stepSimulation."""
     prepared = prepare_object(obj, default_cache_dir() / "objects")
     with Evaluator(prepared, load_gripper("robotiq_3f"), settings,
                    work_dir=default_cache_dir(), world_offset=world_offset) as evaluator:
         if engine:
             p.setPhysicsEngineParameter(physicsClientId=evaluator.client, **engine)
         evaluator.evaluate(poses[0])  # warm caches outside the timing
-        started = time.perf_counter()
-        results = [evaluator.evaluate(pose) for pose in poses]
-        return results, time.perf_counter() - started
+        with StepClock() as steps:
+            started, cpu = time.perf_counter(), time.process_time()
+            results = [evaluator.evaluate(pose) for pose in poses]
+            wall = time.perf_counter() - started
+        if clock is not None:
+            clock.update(cpu_s=time.process_time() - cpu, step_wall_s=steps.wall_s,
+                         step_cpu_s=steps.cpu_s, steps=steps.steps)
+        return results, wall
+
+
+def _grid_in_process(obj_name: str, out) -> None:  # type: ignore[no-untyped-def]
+    """One process of the scaling run: the grid on a warm evaluator, its wall time to `out`."""
+    _, wall = run(ObjectSpec(name=obj_name), SimSettings(), pose_grid())
+    out.put(wall)
+
+
+def scaling(obj_name: str, procs: list[int]) -> dict[str, float]:
+    """k processes at once, each evaluating the whole grid: evaluations/s of all together and
+    the speed-up over one process (issue 21 item 6; meaningful on a machine with ≥ k cores)."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    n = len(pose_grid())
+    figures: dict[str, float] = {}
+    for k in procs:
+        out = ctx.Queue()
+        workers = [ctx.Process(target=_grid_in_process, args=(obj_name, out)) for _ in range(k)]
+        for w in workers:
+            w.start()
+        walls = [out.get() for _ in workers]
+        for w in workers:
+            w.join()
+        # Throughput while all k ran: k grids in the slowest one's time.
+        figures[f"scaling_evals_per_s_{k}_procs"] = k * n / max(walls)
+        print(f"{k} processes: {figures[f'scaling_evals_per_s_{k}_procs']:.2f} evals/s",
+              flush=True)
+    base = figures[f"scaling_evals_per_s_{procs[0]}_procs"] / procs[0]
+    for k in procs:
+        figures[f"scaling_speedup_{k}_procs"] = figures[f"scaling_evals_per_s_{k}_procs"] / base
+    return figures
 
 
 # pybullet's own profiler (STATE_LOGGING_PROFILE_TIMINGS): the scopes one step is split into.
@@ -115,7 +183,16 @@ def main() -> None:
     parser.add_argument("--rate-hz", type=float, help="production physics rate (default: the "
                         "SimSettings default)")
     parser.add_argument("--iterations", type=int, help="production solver iterations")
+    parser.add_argument("--procs", help="also the scaling run: 1,2,4,8,16 processes at once, "
+                        "each evaluating the grid (issue 21 item 6)")
+    parser.add_argument("--scaling-only", action="store_true",
+                        help="only the scaling run (--procs), written to eval_pose_scaling.json")
     args = parser.parse_args()
+    if args.scaling_only:
+        figures = scaling(args.object, [int(k) for k in (args.procs or "1,2").split(",")])
+        write_results("eval_pose_scaling", figures, {"object": args.object,
+                                                     "cpu_count": os.cpu_count()})
+        return
     obj = ObjectSpec(name=args.object)
     poses = pose_grid()
     production = SimSettings()
@@ -126,7 +203,8 @@ def main() -> None:
         production = production.model_copy(update={"physics": physics})
     reference = production.model_copy(
         update={"physics": PhysicsSettings(rate_hz=240.0, solver_iterations=50)})
-    prod, prod_wall = run(obj, production, poses)
+    clock: dict[str, float] = {}
+    prod, prod_wall = run(obj, production, poses, clock=clock)
     ref, ref_wall = (prod, prod_wall) if production == reference else run(obj, reference, poses)
     # The reference's own repeatability: the same grid with the object (and so every pose)
     # moved 1 µm in the world, which changes nothing physical but the floating-point
@@ -145,6 +223,13 @@ def main() -> None:
     figures = {
         "poses": len(poses),
         "evals_per_s_per_core": len(poses) / prod_wall,
+        # The same run's CPU time (less sensitive to a shared machine's other load), the time
+        # inside stepSimulation, and the rate if nothing but the engine took time.
+        "evals_per_cpu_s": len(poses) / clock["cpu_s"],
+        "step_share_of_evaluation_cpu": clock["step_cpu_s"] / clock["cpu_s"],
+        "engine_floor_evals_per_cpu_s": len(poses) / clock["step_cpu_s"],
+        "engine_floor_evals_per_s_per_core": len(poses) / clock["step_wall_s"],
+        "steps": clock["steps"],
         "reference_evals_per_s_per_core": len(poses) / ref_wall,
         "held_grasp_ms": 1000 * float(np.mean([r.eval_time_s for r in held])) if held else 0.0,
         "held_share": len(held) / len(poses),
@@ -167,6 +252,8 @@ def main() -> None:
     for r in prod:
         outcomes[r.outcome.value] = outcomes.get(r.outcome.value, 0) + 1
     print("outcomes:", outcomes)
+    if args.procs:
+        figures.update(scaling(args.object, [int(k) for k in args.procs.split(",")]))
     if not args.no_write:
         write_results("eval_pose", figures, {"object": args.object, "outcomes": outcomes})
     else:
