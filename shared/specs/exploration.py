@@ -177,7 +177,7 @@ class CertificationSpec(BaseModel):
     share: float = Field(
         default=0.05, ge=0.0, le=0.5,
         description="budget: extra evaluations as a share of the exploration's other planned "
-        "poses, split evenly over the large manifolds (0: no certification)")
+        "poses, shared among the large manifolds (0: no certification)")
     candidates: int = Field(
         default=3, ge=0, le=20,
         description="per large manifold, its best poses by point quality (μs) whose N_δ is "

@@ -6,16 +6,17 @@ quality q_δ and success share s_δ (manifolds/robust.py) are read over the neig
 exploration happened to evaluate: a lone held pose among unevaluated neighbours looks as good
 as the middle of a large held region. Certification evaluates, per large manifold,
 
-1. the missing members of N_δ of its current robust best (highest q_δ) and of its best
-   `candidates` poses by point quality (μs), and
+1. the missing members of N_δ of its current robust best (as /best ranks it) and of its
+   best `candidates` poses by point quality (μs), and
 2. once the robust best's N_δ is wholly known, K jitters of the user's stated pose error
    (σ_pos, σ_ang) around it: off-lattice poses drawn deterministically from the centre's key,
 
-within a budget of `share` × the exploration's other planned poses, split evenly over the
-large manifolds. Each certification round is planned at a quiescent point from every stored
-result, so the plan is a function of the stored results and the spec (docs/exploration.md,
-"Determinism"); a round whose robust best changed (its neighbours dropped) certifies the new
-one in the next round, until nothing is left to do or the budget is spent.
+within a budget of `share` × the exploration's other planned poses, shared evenly among the
+large manifolds in each round (`plan`). Each certification round is planned at a quiescent
+point from every stored result, so the plan is a function of the stored results and the
+spec (docs/exploration.md, "Determinism"); a round whose robust best changed (its neighbours
+dropped) certifies the new one in the next round, until nothing is left to do or the budget
+is spent.
 
 A robust claim (`Evidence.certified`) needs the centre held, every member of N_δ known
 (evaluated or shortcut-inferred), the robust label over N_δ ∪ {p} (s_δ ≥ 0.9), and, where
@@ -144,11 +145,9 @@ def jitters(pose: Pose, *, radius_m: float, sigma_pos_m: float, sigma_ang_rad: f
     return out
 
 
-def budgets(spec: CertificationSpec, other_planned: int, n_large: int) -> tuple[int, int]:
-    """(the whole certification's budget, each large manifold's part of it): `share` of the
-    exploration's other planned poses, split evenly over the large manifolds."""
-    total = math.floor(spec.share * other_planned + 1e-9)
-    return total, (total // n_large if n_large else 0)
+def budget(spec: CertificationSpec, other_planned: int) -> int:
+    """The whole certification's budget: `share` of the exploration's other planned poses."""
+    return math.floor(spec.share * other_planned + 1e-9)
 
 
 def plan(
@@ -158,55 +157,56 @@ def plan(
     scores: Mapping[Point, RobustScore],
     spec: CertificationSpec,
     *,
-    per_manifold: int,
     budget_left: int,
-    spent: Mapping[int, int],
-    jittered: set[Point],
     taken: set[str],
     radius_m: Callable[[Point], float],
 ) -> list[Work]:
-    """One certification round over the large `manifolds` (label order; the map's `large`
-    flag: ≥ 1 % of the viable volume, manifolds/robust.large_manifolds).
+    """One certification round over the large `manifolds` (the map's `large` flag: ≥ 1 % of
+    the viable volume, manifolds/robust.large_manifolds).
 
-    `per_manifold`: what one manifold's certification may cost in all (`budgets`);
-    `budget_left`: what the whole certification may still cost; `spent`: what each
-    manifold's certification cost so far (by label, all rounds); `jittered`: centres whose
-    jitters are planned already; `taken`: pose keys planned or stored already. In its turn,
-    a manifold gets first the missing N_δ of its robust best, then (once that is wholly
-    known) its K jitters, all or none, then the missing N_δ of its point-best candidates in
-    order."""
+    `budget_left`: what the whole certification may still cost; `taken`: pose keys planned
+    or stored already. Two passes, each over the manifolds in order — the one holding the
+    overall robust best first, then by label (largest first) — and each giving a manifold
+    an even share of what is left (rounded up) among the manifolds still to come:
+    1. the returned grasps: the missing N_δ of each robust best, or, once that is wholly
+       known, its K jitters (those not planned yet);
+    2. the missing N_δ of each manifold's point-best candidates, in order."""
     left = budget_left
-    if not manifolds or left <= 0:
+    bests = {m.label: robust_best(m.members, samples, scores) for m in manifolds}
+    ranked = [b for b in bests.values() if b is not None]
+    if not ranked or left <= 0:
         return []
+    top = min(ranked, key=lambda p: robust_order(samples[p], scores[p]))
+    order = sorted((m for m in manifolds if bests[m.label] is not None),
+                   key=lambda m: (bests[m.label] != top, m.label))
     seen = set(taken)
     out: list[Work] = []
-    for m in manifolds:
-        room = min(per_manifold - spent.get(m.label, 0), left)
-        best = robust_best(m.members, samples, scores)
-        if best is None or room <= 0:
-            continue
+
+    def returned(m: Manifold, best: Point) -> list[Work]:
         missing = missing_neighbours(lattice, samples, best)
-        groups: list[tuple[list[Work], bool]] = [
-            ([Work(lattice.pose(q), q, best, m.label) for q in missing], False)]
-        if not missing and best not in jittered:
-            shaken = jitters(lattice.pose(best), radius_m=radius_m(best),
-                             sigma_pos_m=spec.pose_error_mm / 1000,
-                             sigma_ang_rad=math.radians(spec.pose_error_deg), k=spec.jitters)
-            groups.append(([Work(pose, None, best, m.label) for pose in shaken], True))
-        groups += [([Work(lattice.pose(q), q, p, m.label)
-                     for q in missing_neighbours(lattice, samples, p)], False)
-                   for p in point_best(m.members, samples, spec.candidates) if p != best]
-        mine: list[Work] = []
-        for items, all_or_none in groups:
-            fresh = [w for w in items if w.pose.key() not in seen]
-            if all_or_none and len(fresh) > room:
-                continue
-            for w in fresh[: max(0, room)]:
-                seen.add(w.pose.key())
-                mine.append(w)
-                room -= 1
-        out += mine
-        left -= len(mine)
+        if missing:
+            return [Work(lattice.pose(q), q, best, m.label) for q in missing]
+        shaken = jitters(lattice.pose(best), radius_m=radius_m(best),
+                         sigma_pos_m=spec.pose_error_mm / 1000,
+                         sigma_ang_rad=math.radians(spec.pose_error_deg), k=spec.jitters)
+        return [Work(pose, None, best, m.label) for pose in shaken]
+
+    def candidates(m: Manifold, best: Point) -> list[Work]:
+        return [Work(lattice.pose(q), q, p, m.label)
+                for p in point_best(m.members, samples, spec.candidates) if p != best
+                for q in missing_neighbours(lattice, samples, p)]
+
+    for wanted in (returned, candidates):
+        for i, m in enumerate(order):
+            room = -(-left // (len(order) - i))  # ceil: the first ones get the remainder
+            for w in wanted(m, bests[m.label]):  # type: ignore[arg-type]
+                if room <= 0:
+                    break
+                if w.pose.key() not in seen:
+                    seen.add(w.pose.key())
+                    out.append(w)
+                    room -= 1
+                    left -= 1
     return out
 
 

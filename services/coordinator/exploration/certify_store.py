@@ -19,7 +19,6 @@ from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.samples import (
     lattice_of,
     load_samples,
-    point_or_none,
 )
 from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.exploration.strategies.base import Planned
@@ -59,15 +58,6 @@ def certification_plans(session: Session, exploration_id: int) -> dict[str, int]
         if centre is not None:
             out[key] = centre
     return out
-
-
-def pose_of_key(key: str) -> Pose:
-    """The pose a pose key stands for (to its six decimals; θ = π is written 3.141593,
-    which is beyond π, so θ is clipped back)."""
-    theta, phi, r, roll, pitch, yaw = (float(x) for x in key.split("/"))
-    return Pose(theta=min(max(theta, 0.0), math.pi), phi=phi, r=min(max(r, 0.0), 1.0),
-                roll=roll, pitch=min(max(pitch, -math.pi), math.pi),
-                yaw=min(max(yaw, -math.pi / 2), math.pi / 2))
 
 
 def _keys_of_ids(session: Session, ids: set[int]) -> dict[int, str]:
@@ -131,30 +121,15 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
                  for m in computed.map.manifolds if m.large]
     plans = certification_plans(session, exploration_id)
     row = session.get(ExplorationRow, exploration_id)
-    other = (row.poses_total if row is not None else 0) - len(plans)
-    total, per_manifold = certify.budgets(cert, other, len(manifolds))
+    total = certify.budget(cert, (row.poses_total if row is not None else 0) - len(plans))
     if not manifolds or total <= len(plans):
         return []
-    point_of = {s.key: p for p, s in samples.items()}
-    centre_key = _keys_of_ids(session, set(plans.values()))
-    centre_point = {c: point_of.get(k) for c, k in centre_key.items()}
-    spent: dict[int, int] = {}
-    jittered: set[Point] = set()
-    for key, c in plans.items():
-        p = centre_point.get(c)
-        if p is None:
-            continue
-        if p in computed.label_of:
-            spent[computed.label_of[p]] = spent.get(computed.label_of[p], 0) + 1
-        if point_or_none(lattice, pose_of_key(key)) is None:
-            jittered.add(p)
     scores = robust_scores(lattice, samples, [p for m in manifolds for p in m.members])
-    taken = set(point_of) | set(session.scalars(select(PosePlanRow.pose_key).where(
-        PosePlanRow.exploration_id == exploration_id)))
-    work = certify.plan(
-        lattice, samples, manifolds, scores, cert, per_manifold=per_manifold,
-        budget_left=total - len(plans), spent=spent, jittered=jittered, taken=taken,
-        radius_m=lambda p: _radius(computed, p))
+    taken = {s.key for s in samples.values()} | set(session.scalars(
+        select(PosePlanRow.pose_key).where(PosePlanRow.exploration_id == exploration_id)))
+    work = certify.plan(lattice, samples, manifolds, scores, cert,
+                        budget_left=total - len(plans), taken=taken,
+                        radius_m=lambda p: _radius(computed, p))
     if orbits is not None:
         # A member is evaluated as its orbit's representative, mirrored onto it on arrival.
         work = [w if w.point is None else certify.Work(

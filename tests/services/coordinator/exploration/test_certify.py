@@ -16,7 +16,6 @@ from graspscape.services.coordinator.exploration.accounting import exploration_b
 from graspscape.services.coordinator.exploration.certify_store import (
     certification_plans,
     certified_bests,
-    pose_of_key,
     robust_summary,
 )
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
@@ -88,29 +87,37 @@ def _held(p: Point, mu: float = 0.5) -> StoredPose:
                       digits=frozenset({"A", "B", "C"}))
 
 
-def test_plan_completes_the_robust_best_first_then_jitters_it_within_budget() -> None:
-    samples = {LONE: _held(LONE, 0.9)}
-    manifolds = [certify.Manifold(0, (LONE,))]
-    hood = neighbourhood(LATTICE, LONE)
+def _plan(samples, manifolds, budget: int, taken: set[str] = frozenset()
+          ) -> list[certify.Work]:
+    return certify.plan(LATTICE, samples, manifolds, robust_scores(LATTICE, samples), CERT,
+                        budget_left=budget, taken=set(taken), radius_m=lambda p: 0.05)
 
-    def plan(budget: int, jittered: set[Point] = frozenset()) -> list[certify.Work]:
-        return certify.plan(LATTICE, samples, manifolds, robust_scores(LATTICE, samples),
-                            CERT, per_manifold=budget, budget_left=budget, spent={},
-                            jittered=set(jittered), taken=set(), radius_m=lambda p: 0.05)
 
-    work = plan(100)
-    # Its neighbours, all of them, and no jitter while they are unknown.
-    assert [w.point for w in work] == hood and {w.centre for w in work} == {LONE}
-    assert [w.point for w in plan(3)] == hood[:3]
-    # Once N_δ is known (here: all dropped), the K jitters, all or none.
-    for q in hood:
+def _drop(samples, points) -> None:
+    for q in points:
         pose = LATTICE.pose(q)
         samples[q] = StoredPose(key=pose.key(), theta=pose.theta, phi=pose.phi, r=pose.r,
                                 roll=pose.roll, pitch=pose.pitch, yaw=pose.yaw, viable=False,
                                 outcome="no_grasp", mu_s=0.0)
-    work = plan(100)
+
+
+def test_plan_completes_the_robust_best_first_then_jitters_it_within_budget() -> None:
+    samples = {LONE: _held(LONE, 0.9)}
+    manifolds = [certify.Manifold(0, (LONE,))]
+    hood = neighbourhood(LATTICE, LONE)
+    work = _plan(samples, manifolds, 100)
+    # Its neighbours, all of them, and no jitter while they are unknown.
+    assert [w.point for w in work] == hood and {w.centre for w in work} == {LONE}
+    assert [w.point for w in _plan(samples, manifolds, 3)] == hood[:3]
+    # Once N_δ is known (here: all dropped), the K jitters; a smaller budget takes the first
+    # ones, and a later round the rest.
+    _drop(samples, hood)
+    work = _plan(samples, manifolds, 100)
     assert [w.point for w in work] == [None] * CERT.jitters
-    assert plan(CERT.jitters - 1) == [] and plan(100, {LONE}) == []
+    first = _plan(samples, manifolds, 3)
+    assert [w.pose for w in first] == [w.pose for w in work[:3]]
+    rest = _plan(samples, manifolds, 100, {w.pose.key() for w in first})
+    assert [w.pose for w in rest] == [w.pose for w in work[3:]]
     # And the claim: every neighbour known, none held: not robust, whatever the jitters say.
     score = robust_scores(LATTICE, samples, [LONE])[LONE]
     ev = certify.evidence(LATTICE, samples, LONE, score, [samples[LONE]] * 4,
@@ -118,16 +125,26 @@ def test_plan_completes_the_robust_best_first_then_jitters_it_within_budget() ->
     assert (ev.known, ev.held, ev.jitters_held, ev.certified) == (len(hood), 0, 4, False)
 
 
-def test_a_pose_key_reads_back_as_its_lattice_point_even_at_the_poles() -> None:
-    # θ = π is written 3.141593 in a key, beyond π: read back, it is still the south pole.
-    for p in (Point(0, 0, 0, 0), Point(LATTICE.n_rings, 0, 2, 0), LONE):
-        assert LATTICE.point(pose_of_key(LATTICE.pose(p).key())) == p
+def test_plan_shares_the_budget_returned_grasps_first_overall_best_first() -> None:
+    # Two one-pose manifolds on opposite sides; manifold 1 holds the better grasp.
+    other = Point(LATTICE.scale(0) * 2, LATTICE.m(LATTICE.scale(0) * 2) // 2, 0, 0)
+    samples = {LONE: _held(LONE, 0.5), other: _held(other, 0.9)}
+    manifolds = [certify.Manifold(0, (LONE,)), certify.Manifold(1, (other,))]
+    work = _plan(samples, manifolds, 3)
+    # ceil(3 / 2) = 2 for the overall best's manifold, the 1 left for the other.
+    assert [(w.label, w.centre) for w in work] == [(1, other), (1, other), (0, LONE)]
+    assert [w.point for w in work] == neighbourhood(LATTICE, other)[:2] + \
+        neighbourhood(LATTICE, LONE)[:1]
+    # Candidates' neighbourhoods only after every returned grasp's (here the candidate is
+    # the robust best itself, so nothing more): the budget is not a quota to fill.
+    assert len(_plan(samples, manifolds, 1000)) == \
+        len(neighbourhood(LATTICE, other)) + len(neighbourhood(LATTICE, LONE))
 
 
-def test_budget_is_a_share_of_the_other_planned_poses_split_over_large_manifolds() -> None:
-    assert certify.budgets(CertificationSpec(), 1000, 3) == (50, 16)
-    assert certify.budgets(CertificationSpec(share=0.0), 1000, 3) == (0, 0)
-    assert certify.budgets(CertificationSpec(), 1000, 0) == (50, 0)
+def test_budget_is_a_share_of_the_other_planned_poses() -> None:
+    assert certify.budget(CertificationSpec(), 1000) == 50
+    assert certify.budget(CertificationSpec(share=0.0), 1000) == 0
+    assert certify.budget(CertificationSpec(share=0.5), 7) == 3
     assert certify.centre_id_of(certify.reason_for(12345)) == 12345
     assert certify.centre_id_of("search") is None
 
@@ -166,10 +183,6 @@ def _explore(sessions, object_id: int, oracle, *, workers: int = 2, seed: int = 
         eid = create_exploration(s, spec=spec, tile_target_poses=20, max_poses=10**6).id
     run_local(sessions, evaluate, workers=workers, seed=seed, split=2)
     return eid
-
-
-def _point(key: str) -> Point:
-    return LATTICE.point(pose_of_key(key))
 
 
 def _plan_of(sessions, eid: int) -> list[tuple[str, str]]:
@@ -245,7 +258,7 @@ def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
         CERT.jitters
     # Certification completed N_δ itself (refinement evaluated nothing inside the region).
     plan = _plan_of(sessions, eid)
-    members = {LATTICE.pose(q).key() for q in neighbourhood(LATTICE, _point(best.key))}
+    members = {LATTICE.pose(q).key() for q in neighbourhood(LATTICE, LATTICE.point(best.pose))}
     assert members & {k for k, c in plan if c == best.key}
     # Same spec, other worker count and report order: the same certification plan.
     again = _explore(sessions, object_id, _cap, workers=3, seed=7, search_rounds=0)
