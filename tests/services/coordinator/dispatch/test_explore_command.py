@@ -34,5 +34,5 @@ def test_explore_maps_an_object_on_this_machine(tmp_path: Path):
     # Its robust best grasp, with what backs it (levels 0: no certification rounds).
     assert "robust best grasp per large manifold" in run.stdout
     assert re.search(r"^  A: .* N_δ \d+/\d+ known, \d+ held; jitters 0/0 held; "
-                     r"not certified: [a-z ]+$", run.stdout, re.M), run.stdout
+                     r"not certified: .+$", run.stdout, re.M), run.stdout
     assert "pybullet build time" not in run.stderr
