@@ -18,19 +18,17 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import tempfile
 from collections.abc import Iterator
 from typing import IO, Any, Literal
 
-from graspscape.services.coordinator.manifolds.behaviour import source_of
 from graspscape.services.coordinator.manifolds.grouping import label_name
 from graspscape.services.coordinator.store.models import (
     POSE_METRIC_COLUMNS,
     ManifoldRow,
     PoseRow,
 )
-from sqlalchemy import select
+from sqlalchemy import Text, case, cast, func, literal, or_, select
 from sqlalchemy.orm import Session
 
 ROBUST_COLUMNS = ("robust_s", "robust_q", "robust_label")
@@ -49,42 +47,69 @@ PoseFormat = Literal["csv", "parquet"]
 MEDIA_TYPES: dict[PoseFormat, str] = {"csv": "text/csv",
                                       "parquet": "application/vnd.apache.parquet"}
 
-_SELECTED = (
-    PoseRow.pose_key, PoseRow.theta, PoseRow.phi, PoseRow.r, PoseRow.roll, PoseRow.pitch,
-    PoseRow.yaw, PoseRow.outcome, PoseRow.viable, PoseRow.mu_s, PoseRow.effort_max_nm,
-    PoseRow.effective_r, PoseRow.manifold_id, PoseRow.worker_id, PoseRow.inferred_from,
-    PoseRow.signature, PoseRow.grasp, PoseRow.eval_time_s,
-    *(getattr(PoseRow, name) for name in POSE_METRIC_COLUMNS),
-    *(getattr(PoseRow, name) for name in ROBUST_COLUMNS), PoseRow.error,
-)
-# One encoder for every row: json.dumps(..., sort_keys=True) would build one per call.
-_to_json = json.JSONEncoder(sort_keys=True).encode
-
-
-def _row(row: Any, labels: dict[int, str]) -> tuple[Any, ...]:
-    """One pose as the export's values, in COLUMNS order."""
-    signature, grasp = row.signature, row.grasp
-    return (
-        row.pose_key, row.theta, row.phi, row.r, row.roll, row.pitch, row.yaw, row.outcome,
-        bool(row.viable), row.mu_s, row.effort_max_nm, row.effective_r,
-        labels.get(row.manifold_id, "") if row.manifold_id else "",
-        source_of(row.worker_id, row.inferred_from),
-        row.inferred_from or "",
-        " ".join((signature or {}).get("links_in_contact", ())),
-        _to_json(grasp) if grasp else "",
-        _to_json(signature) if signature else "",
-        row.eval_time_s,
-        *(getattr(row, name) for name in POSE_METRIC_COLUMNS),
-        row.robust_s, row.robust_q, row.robust_label,
-        row.error or "",
+def _cells(labels: dict[int, str], dialect: str, *, for_csv: bool) -> tuple[Any, ...]:
+    """The export's columns computed by the database, in COLUMNS order, so that a row
+    leaves the driver as the tuple the writer takes and no Python runs per row: the JSON
+    columns as their stored text (written once at ingest, see store/ingest._json_text), the
+    manifold's letters and the source by CASE, the digits in contact from the signature's
+    JSON. Decoding and encoding the JSON again per row was two thirds of an export's time."""
+    # The digits in contact: the signature's `links_in_contact` array, '["palm","finger_1"]'
+    # (pydantic's text; '", "' where json.dumps wrote it), to 'palm finger_1' by string
+    # replacement (link names are URDF identifiers: no quotes, commas or spaces).
+    if dialect == "postgresql":
+        array = PoseRow.signature.op("->>")(literal("links_in_contact"))
+    else:
+        array = func.json_extract(PoseRow.signature, "$.links_in_contact")
+    links = func.replace(func.replace(func.replace(
+        func.trim(array, "[]"), '", "', " "), '","', " "), '"', "")
+    manifold = (case(labels, value=PoseRow.manifold_id, else_=literal(""))
+                if labels else literal(""))
+    source = case(
+        (PoseRow.worker_id.like("shortcut:%"), PoseRow.worker_id),
+        (func.coalesce(PoseRow.inferred_from, "") != "", literal("shortcut:configuration")),
+        else_=literal("evaluated"),
     )
+    viable = (case((PoseRow.viable, literal("True")), else_=literal("False")) if for_csv
+              else PoseRow.viable)
+    texts = {"pose_key": PoseRow.pose_key, "outcome": PoseRow.outcome, "manifold": manifold,
+             "source": source, "inferred_from": func.coalesce(PoseRow.inferred_from, ""),
+             "links_in_contact": func.coalesce(links, ""),
+             "robust_label": PoseRow.robust_label, "error": func.coalesce(PoseRow.error, "")}
+    grasp = func.coalesce(cast(PoseRow.grasp, Text), "")
+    signature = func.coalesce(cast(PoseRow.signature, Text), "")
+    if for_csv:  # JSON always holds '"', so the CSV writer would always quote it so
+        grasp, signature = _quoted(grasp), _quoted(signature)
+    cells = (
+        texts["pose_key"], PoseRow.theta, PoseRow.phi, PoseRow.r, PoseRow.roll, PoseRow.pitch,
+        PoseRow.yaw, texts["outcome"], viable, PoseRow.mu_s, PoseRow.effort_max_nm,
+        PoseRow.effective_r, texts["manifold"], texts["source"], texts["inferred_from"],
+        texts["links_in_contact"], grasp, signature, PoseRow.eval_time_s,
+        *(getattr(PoseRow, name) for name in POSE_METRIC_COLUMNS),
+        PoseRow.robust_s, PoseRow.robust_q, texts["robust_label"], texts["error"],
+    )
+    if not for_csv:
+        return cells
+    # Whether another text of the row needs the CSV writer's quoting (rare: an error
+    # message with a comma): such rows go through csv.writer, the others are joined.
+    special = or_(*(text.like(f"%{c}%") for text in texts.values() for c in _SPECIAL))
+    return (*cells, case((special, literal(1)), else_=literal(0)))
 
 
-def row_chunks(session: Session, exploration_id: int,
-               chunk: int | None = None) -> Iterator[list[tuple[Any, ...]]]:
+_SPECIAL = (",", '"', "\n", "\r")
+
+
+def _quoted(text: Any) -> Any:
+    """A CSV field as csv.writer quotes one holding a quote: in quotes, quotes doubled."""
+    return case((text == "", literal("")),
+                else_=literal('"') + func.replace(text, '"', '""') + literal('"'))
+
+
+def row_chunks(session: Session, exploration_id: int, chunk: int | None = None, *,
+               for_csv: bool = True) -> Iterator[list[tuple[Any, ...]]]:
     """The export rows (tuples in COLUMNS order) of every pose, by key, `chunk` at a time
     from one server-side cursor; manifold labels from one small query (manifold id →
-    letters), not one per row."""
+    letters), not one per row. `for_csv`: `viable` as the text CSV has always shown
+    ("True"/"False"), else a bool."""
     labels = {
         mid: label_name(label)
         for mid, label in session.execute(
@@ -92,24 +117,51 @@ def row_chunks(session: Session, exploration_id: int,
                 ManifoldRow.exploration_id == exploration_id)
         )
     }
-    query = (select(*_SELECTED).where(PoseRow.exploration_id == exploration_id)
-             .order_by(PoseRow.pose_key).execution_options(yield_per=chunk or CHUNK))
-    for part in session.execute(query).partitions():
-        yield [_row(row, labels) for row in part]
+    dialect = session.get_bind().dialect.name
+    query = (select(*_cells(labels, dialect, for_csv=for_csv))
+             .where(PoseRow.exploration_id == exploration_id)
+             .order_by(PoseRow.pose_key))
+    # The driver's own rows through the session's connection (a server-side cursor on
+    # PostgreSQL): the ORM's row loading cost as much as the query.
+    sql = str(query.compile(dialect=session.get_bind().dialect,
+                            compile_kwargs={"literal_binds": True}))
+    result = session.connection().exec_driver_sql(
+        sql, execution_options={"stream_results": True})
+    yield from result.partitions(chunk or CHUNK)
 
 
 def csv_chunks(chunks: Iterator[list[tuple[Any, ...]]]) -> Iterator[bytes]:
-    """The CSV text, header first, one encoded piece per chunk of rows."""
+    """The CSV text, header first, one encoded piece per chunk of rows (row_chunks's rows
+    for CSV: JSON quoted already, the `special` flag last). A row is its cells' str()
+    joined by commas, which is what csv.writer writes for cells that need no quoting
+    (str(float) is repr, None is empty); a flagged row goes through csv.writer itself."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(COLUMNS)
+    yield buf.getvalue().encode()
     for rows in chunks:
-        writer.writerows(rows)
-        yield buf.getvalue().encode()
-        buf.seek(0)
-        buf.truncate()
-    if buf.tell():  # the header of an exploration without poses
-        yield buf.getvalue().encode()
+        lines = []
+        for row in rows:
+            if row[-1]:
+                lines.append(_through_writer(row[:-1]))
+            else:
+                lines.append(",".join(["" if v is None else str(v) for v in row[:-1]]))
+        lines.append("")
+        yield "\n".join(lines).encode()
+
+
+_JSON_AT = (COLUMNS.index("grasp"), COLUMNS.index("signature"))
+
+
+def _through_writer(row: tuple[Any, ...]) -> str:
+    cells = list(row)
+    for i in _JSON_AT:  # undo the quoting the database did: the writer does its own
+        cells[i] = cells[i][1:-1].replace('""', '"')
+    buf = io.StringIO()
+    # The same line terminator as the whole file's writer: csv quotes a field that holds
+    # one of its characters.
+    csv.writer(buf, lineterminator="\n").writerow(cells)
+    return buf.getvalue()[:-1]
 
 
 def _schema() -> Any:
@@ -124,6 +176,13 @@ def _schema() -> Any:
     return pa.schema([(c, types.get(c, pa.string())) for c in COLUMNS])
 
 
+def _arrow(pa: Any, values: Any, kind: Any) -> Any:
+    if kind == pa.bool_():  # SQLite's driver gives 0/1: converted by arrow, not per row
+        return pa.array(values, type=pa.int8()).cast(kind) if values and not isinstance(
+            values[0], bool) else pa.array(values, type=kind)
+    return pa.array(values, type=kind)
+
+
 def write_parquet(chunks: Iterator[list[tuple[Any, ...]]], out: IO[bytes]) -> None:
     """Parquet into `out`, one row group per chunk of rows (built column by column)."""
     import pyarrow as pa
@@ -135,7 +194,7 @@ def write_parquet(chunks: Iterator[list[tuple[Any, ...]]], out: IO[bytes]) -> No
         for rows in chunks:
             columns = list(zip(*rows, strict=True)) if rows else [()] * len(COLUMNS)
             writer.write_table(pa.Table.from_arrays(
-                [pa.array(col, type=f.type) for col, f in zip(columns, schema, strict=True)],
+                [_arrow(pa, col, f.type) for col, f in zip(columns, schema, strict=True)],
                 schema=schema))
             wrote = True
         if not wrote:  # no poses: the schema and an empty row group, as write_table makes
@@ -146,7 +205,7 @@ def pose_pieces(session: Session, exploration_id: int, fmt: PoseFormat) -> Itera
     """Every pose of the exploration as CSV or Parquet, in pieces to send or write in turn.
     Parquet's footer comes last, so it is written (by row groups) into a temporary file that
     stays in memory up to SPOOL_BYTES, then read back in blocks."""
-    chunks = row_chunks(session, exploration_id)
+    chunks = row_chunks(session, exploration_id, for_csv=fmt == "csv")
     if fmt == "csv":
         yield from csv_chunks(chunks)
         return

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 
 import pyarrow.parquet as pq
 import pytest
@@ -18,16 +17,21 @@ from graspscape.services.coordinator.store.models import (
     ManifoldRow,
     PoseRow,
 )
-from sqlalchemy import select
+from sqlalchemy import Text, cast, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from tests.services.coordinator.api.test_explorations import submit, work
 
 
 def expected_csv(sessions: sessionmaker[Session], eid: int) -> bytes:
-    """The export as it was written before streaming: every ORM row in memory, one writer."""
+    """The export as it was written before streaming: every ORM row in memory, one writer;
+    the JSON columns as the text stored at ingest (since 2026-12 the export copies it: it
+    was decoded and encoded again with sorted keys, two thirds of an export's time)."""
     with sessions() as s:
         labels = {mid: label for mid, label in s.execute(select(ManifoldRow.id, ManifoldRow.label))}
+        stored = {key: (grasp, signature) for key, grasp, signature in s.execute(
+            select(PoseRow.pose_key, cast(PoseRow.grasp, Text), cast(PoseRow.signature, Text))
+            .where(PoseRow.exploration_id == eid))}
         rows = s.scalars(select(PoseRow).where(PoseRow.exploration_id == eid)
                          .order_by(PoseRow.pose_key)).all()
         buf = io.StringIO()
@@ -44,8 +48,8 @@ def expected_csv(sessions: sessionmaker[Session], eid: int) -> bytes:
                 "manifold": label_name(labels[row.manifold_id]) if row.manifold_id else "",
                 "source": source, "inferred_from": row.inferred_from or "",
                 "links_in_contact": " ".join((row.signature or {}).get("links_in_contact", ())),
-                "grasp": json.dumps(row.grasp, sort_keys=True) if row.grasp else "",
-                "signature": json.dumps(row.signature, sort_keys=True) if row.signature else "",
+                "grasp": stored[row.pose_key][0] or "",
+                "signature": stored[row.pose_key][1] or "",
                 "eval_time_s": row.eval_time_s,
                 **{name: getattr(row, name) for name in POSE_METRIC_COLUMNS},
                 **{name: getattr(row, name) for name in export.ROBUST_COLUMNS},
@@ -64,6 +68,13 @@ def test_exports_stream_in_chunks_with_the_same_content(
     assert pq.read_table(io.BytesIO(
         client.get(f"/explorations/{eid}/export/poses.parquet").content)).num_rows == 0
     work(sessions, 10_000)
+    with sessions() as s:  # texts the CSV must quote: the writer's own path for those rows
+        keys = s.scalars(select(PoseRow.pose_key).where(PoseRow.exploration_id == eid)
+                         .order_by(PoseRow.pose_key).limit(3)).all()
+        for key, error in zip(keys, ['ValueError: a, b', 'KeyError: "x"', 'a "b", c'],
+                              strict=True):
+            s.execute(update(PoseRow).where(PoseRow.pose_key == key).values(error=error))
+        s.commit()
     whole = client.get(f"/explorations/{eid}/export/poses.csv")
     assert whole.headers["content-type"].startswith("text/csv")
     assert whole.content == expected_csv(sessions, eid)
