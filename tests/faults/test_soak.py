@@ -5,6 +5,7 @@ zenoh session stays open at the coordinator, nor any zenoh shared memory in /dev
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -12,8 +13,11 @@ import pytest
 
 from tests.faults.soak import soak_isolated
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(shutil.which("ss") is None, reason="needs ss (iproute2)")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(os.geteuid() != 0 or any(shutil.which(tool) is None for tool in (
+        "ss", "unshare", "fuser")), reason="needs root, ss, unshare and fuser"),
+]
 
 
 def test_kills_every_50_tiles_lose_nothing_and_leave_no_session(tmp_path: Path) -> None:
