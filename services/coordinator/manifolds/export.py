@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import io
 import tempfile
+import uuid
 from collections.abc import Iterator
 from typing import IO, Any, Literal
 
@@ -121,13 +122,24 @@ def row_chunks(session: Session, exploration_id: int, chunk: int | None = None, 
     query = (select(*_cells(labels, dialect, for_csv=for_csv))
              .where(PoseRow.exploration_id == exploration_id)
              .order_by(PoseRow.pose_key))
-    # The driver's own rows through the session's connection (a server-side cursor on
-    # PostgreSQL): the ORM's row loading cost as much as the query.
+    # The driver's own cursor on the session's connection (server-side on PostgreSQL), its
+    # rows plain tuples: the ORM's row loading cost as much as the query, SQLAlchemy's rows
+    # a fifth of an export.
     sql = str(query.compile(dialect=session.get_bind().dialect,
                             compile_kwargs={"literal_binds": True}))
-    result = session.connection().exec_driver_sql(
-        sql, execution_options={"stream_results": True})
-    yield from result.partitions(chunk or CHUNK)
+    dbapi = session.connection().connection.dbapi_connection
+    size = chunk or CHUNK
+    if dialect == "postgresql":
+        cursor = dbapi.cursor(name=f"pose_export_{exploration_id}_{uuid.uuid4().hex[:8]}")
+        cursor.itersize = size
+    else:
+        cursor = dbapi.cursor()
+    try:
+        cursor.execute(sql)
+        while rows := cursor.fetchmany(size):
+            yield rows
+    finally:
+        cursor.close()
 
 
 def csv_chunks(chunks: Iterator[list[tuple[Any, ...]]]) -> Iterator[bytes]:
