@@ -52,7 +52,7 @@ from graspscape.workers.sim.objects import (
     spawn_object,
 )
 from graspscape.workers.sim.policies import get_policy
-from graspscape.workers.sim.render import render_scene
+from graspscape.workers.sim.render import render_grasp
 from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, run_tests
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
@@ -248,7 +248,7 @@ class Evaluator:
         result.update(scene_metrics(scene, self.length, self.prepared.mass_kg))  # μg, μf, μm
 
         if picture is not None:
-            render_scene(self.client, obj_pos, picture)
+            render_grasp(self.client, hand.body, scene.object_body, picture)
         donor = None if donors is None else donors.find(
             pose, result["grasp"], result["signature"].links_in_contact)
         if donor is not None:
@@ -420,5 +420,6 @@ def render_pose(pose: Pose, path: Path, *, obj: ObjectSpec,
     evaluator = _evaluator(obj, gripper, settings, cache_dir)
     result = evaluator.evaluate(pose, picture=path)
     if not path.exists():
-        render_scene(evaluator.client, evaluator.scene.offset, path)
+        render_grasp(evaluator.client, evaluator.scene.hand.body, evaluator.scene.object_body,
+                     path)
     return path, result
