@@ -88,15 +88,24 @@ def components(lattice: Lattice, samples: Mapping[Point, StoredPose]) -> list[li
 
 
 def _merge_specks(
-    lattice: Lattice, samples: Mapping[Point, StoredPose], comps: list[list[Point]]
+    lattice: Lattice,
+    samples: Mapping[Point, StoredPose],
+    comps: list[list[Point]],
+    owner_of: Callable[[Point], int | None] | None = None,
 ) -> list[list[Point]]:
     """Fold specks (fewer than max(MIN_POSES, MIN_SHARE of the viable poses) members) into
     the larger neighbouring component they nearly match most often (same digits, joints
     within SPECK_TOLERANCE_RAD): a lone pose whose fingers closed a little differently is
-    noise, not a behaviour. A speck with no such neighbour stays on its own."""
+    noise, not a behaviour. A speck with no such neighbour stays on its own.
+
+    `owner_of(q)` is the index into `comps` of q's component (None: not viable); a caller
+    that keeps the components (manifolds/incremental.py) passes its own instead of the
+    index built here over every point. Components not merged are returned as given (the
+    same list objects, already sorted)."""
     n_viable = sum(len(c) for c in comps)
     small = max(MIN_POSES, math.ceil(MIN_SHARE * n_viable))
-    owner = {p: i for i, c in enumerate(comps) for p in c}
+    if owner_of is None:
+        owner_of = {p: i for i, c in enumerate(comps) for p in c}.get
     merged: dict[int, int] = {}
     for i, comp in enumerate(comps):
         if len(comp) >= small:
@@ -105,13 +114,15 @@ def _merge_specks(
         for p in comp:
             for level in range(lattice.birth(p), lattice.depth + 1):
                 for _, q in lattice.neighbours(p, level):
-                    j = owner.get(q)
+                    j = owner_of(q)
                     if j is not None and j != i and len(comps[j]) >= small and same_behaviour(
                         samples[p], samples[q], SPECK_TOLERANCE_RAD
                     ):
                         votes[j] += 1
         if votes:
             merged[i] = min(votes, key=lambda j: (-votes[j], j))
+    if not merged:  # the usual case: every component as it is, in its order
+        return comps
     out: dict[int, list[Point]] = {}
     for i, comp in enumerate(comps):
         out.setdefault(merged.get(i, i), []).extend(comp)

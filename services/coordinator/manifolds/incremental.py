@@ -1,0 +1,229 @@
+"""Manifold grouping kept current batch by batch (pure): the same components as
+`grouping.components` over everything seen, without recomputing the whole map.
+
+The links are those of `grouping.components`: a viable pose p links a same-behaviour viable
+neighbour q of one of its levels L (from its birth level down) unless the level-L+1 midpoint
+of (p, q) is stored, and its attitude neighbours always. A link is added when the later of
+its two ends arrives; one whose midpoint arrives later is cut then (refinement found the
+border between them). Components are kept as explicit member sets:
+
+- joins merge the smaller set into the larger (each point moves O(log n) times in all);
+- a cut link (p, q) is checked by two breadth-first searches run in step from p and from q
+  over the remaining links: they meet (still one component: usually within a few steps,
+  through the new midpoint's own links) or one side runs out first, and that side (the
+  smaller part) becomes a new component.
+
+So a batch costs its own points' neighbourhoods plus the parts it splits off, not the map.
+`components()` then folds the specks as `grouping.components` does (`_merge_specks`, which
+looks only at the components below the speck size) and hands the components over in the
+canonical order; the sorted member lists are cached per component and rebuilt only where a
+batch changed that component. Samples are stored results: a point arriving again with the
+same result changes nothing, with a different one the state is rebuilt from everything seen.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Mapping
+
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
+from graspscape.services.coordinator.manifolds.grouping import _merge_specks
+
+Pair = tuple[Point, Point]
+
+
+def _pair(p: Point, q: Point) -> Pair:
+    return (p, q) if p < q else (q, p)
+
+
+class IncrementalGrouping:
+    """Components of the samples fed so far (`add`), equal to `grouping.components`."""
+
+    def __init__(self, lattice: Lattice) -> None:
+        self.lattice = lattice
+        self.samples: dict[Point, StoredPose] = {}
+        # Live links: directed links per unordered pair (a pair may be linked from both ends,
+        # each with its own midpoint), and the adjacency of pairs with at least one.
+        self._count: dict[Pair, int] = {}
+        self._adj: dict[Point, set[Point]] = {}
+        # midpoint → the pairs of the live links it cuts when it arrives
+        self._cutters: dict[Point, list[Pair]] = {}
+        self._comp_of: dict[Point, int] = {}
+        self._members: dict[int, set[Point]] = {}
+        self._sorted: dict[int, list[Point]] = {}  # cache of sorted(members), per component
+        self._next_id = 0
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    # --- feeding ---------------------------------------------------------------------------
+    def add(self, batch: Iterable[tuple[Point, StoredPose]]) -> None:
+        """Take a batch of stored samples (any order, any mix of levels)."""
+        new: dict[Point, StoredPose] = {}
+        for p, s in batch:
+            old = self.samples.get(p, new.get(p))
+            if old is None:
+                new[p] = s
+            elif old != s:  # a stored result changed: not incremental any more
+                self._rebuild({**self.samples, **new, p: s})
+                return
+        if not new:
+            return
+        self.samples.update(new)
+        for p, s in new.items():
+            if s.viable:
+                self._new_component(p)
+        # Links of the new points, each directed link once: outgoing of every new point,
+        # incoming from points stored before this batch.
+        for p in sorted(new):
+            if not new[p].viable:
+                continue
+            for q, mid in self._outgoing(p):
+                self._link(p, q, mid)
+            for q in self._candidates(p):
+                if q in new:
+                    continue
+                for target, mid in self._outgoing(q):
+                    if target == p:
+                        self._link(q, p, mid)
+        # Then the links the new points cut (all of them made before this batch).
+        cut: list[Pair] = []
+        for m in new:
+            for pair in self._cutters.pop(m, ()):
+                if self._unlink(pair):
+                    cut.append(pair)
+        for p, q in cut:
+            if self._comp_of[p] == self._comp_of[q]:
+                self._split(p, q)
+
+    def _rebuild(self, samples: Mapping[Point, StoredPose]) -> None:
+        fresh = IncrementalGrouping(self.lattice)
+        fresh.add(samples.items())
+        self.__dict__.update(fresh.__dict__)
+
+    def _candidates(self, p: Point) -> set[Point]:
+        """Stored viable points that may link to p: its own neighbours at its levels (the
+        neighbour relation is symmetric: tests/…/test_incremental.py checks it)."""
+        lat = self.lattice
+        out: set[Point] = set()
+        for level in range(lat.birth(p), lat.depth + 1):
+            out.update(q for _, q in lat.neighbours(p, level))
+        out.update(lat.attitude_neighbours(p))
+        out.discard(p)
+        return {q for q in out if (s := self.samples.get(q)) is not None and s.viable}
+
+    def _outgoing(self, p: Point) -> list[tuple[Point, Point | None]]:
+        """p's links as `grouping.components` makes them, to stored points: (q, the midpoint
+        that cuts it or None), those already cut left out; same behaviour not yet checked."""
+        lat, samples = self.lattice, self.samples
+        out: list[tuple[Point, Point | None]] = []
+        for level in range(lat.birth(p), lat.depth + 1):
+            for _, q in lat.neighbours(p, level):
+                if q not in samples:
+                    continue
+                mid = lat.midpoint(p, q, level)
+                if mid is None or mid not in samples:
+                    out.append((q, mid))
+        out += [(q, None) for q in lat.attitude_neighbours(p) if q in samples]
+        return out
+
+    def _link(self, p: Point, q: Point, mid: Point | None) -> None:
+        a, b = self.samples[p], self.samples[q]
+        if not (a.viable and b.viable and same_behaviour(a, b)):
+            return
+        pair = _pair(p, q)
+        n = self._count.get(pair, 0)
+        self._count[pair] = n + 1
+        if mid is not None:
+            self._cutters.setdefault(mid, []).append(pair)
+        if n == 0:
+            self._adj.setdefault(p, set()).add(q)
+            self._adj.setdefault(q, set()).add(p)
+            self._join(p, q)
+
+    def _unlink(self, pair: Pair) -> bool:
+        """Drop one directed link of the pair; True when the pair has none left."""
+        n = self._count[pair] - 1
+        if n:
+            self._count[pair] = n
+            return False
+        del self._count[pair]
+        p, q = pair
+        self._adj[p].discard(q)
+        self._adj[q].discard(p)
+        return True
+
+    # --- components ------------------------------------------------------------------------
+    def _new_component(self, p: Point) -> None:
+        cid = self._next_id
+        self._next_id += 1
+        self._comp_of[p] = cid
+        self._members[cid] = {p}
+
+    def _join(self, p: Point, q: Point) -> None:
+        a, b = self._comp_of[p], self._comp_of[q]
+        if a == b:
+            return
+        if len(self._members[a]) < len(self._members[b]):
+            a, b = b, a
+        moved = self._members.pop(b)
+        self._sorted.pop(b, None)
+        self._sorted.pop(a, None)
+        for x in moved:
+            self._comp_of[x] = a
+        self._members[a] |= moved
+
+    def _split(self, p: Point, q: Point) -> None:
+        """p and q lost their direct link: search from both in step; if one search runs out
+        before they meet, its points are a component of their own."""
+        seen = ({p}, {q})
+        queues = (deque([p]), deque([q]))
+        while True:
+            for side in (0, 1):
+                queue, mine, other = queues[side], seen[side], seen[1 - side]
+                if not queue:
+                    self._detach(mine)
+                    return
+                x = queue.popleft()
+                for y in self._adj.get(x, ()):
+                    if y in other:
+                        return  # they meet: still one component
+                    if y not in mine:
+                        mine.add(y)
+                        queue.append(y)
+
+    def _detach(self, part: set[Point]) -> None:
+        old = self._comp_of[next(iter(part))]
+        self._members[old] -= part
+        self._sorted.pop(old, None)
+        cid = self._next_id
+        self._next_id += 1
+        self._members[cid] = part
+        for x in part:
+            self._comp_of[x] = cid
+
+    # --- reading ---------------------------------------------------------------------------
+    def raw_components(self) -> list[list[Point]]:
+        """The linked components before speck folding, each sorted, by their first point."""
+        out = []
+        for cid, members in self._members.items():
+            comp = self._sorted.get(cid)
+            if comp is None:
+                comp = self._sorted[cid] = sorted(members)
+            out.append(comp)
+        out.sort(key=lambda c: c[0])
+        return out
+
+    def components(self) -> list[list[Point]]:
+        """What `grouping.components(lattice, samples)` gives for every sample fed so far.
+        The lists are shared with the cache: callers must not change them."""
+        raw = self.raw_components()
+        index = {id(c): i for i, c in enumerate(raw)}
+        comp_of, sorted_of = self._comp_of, self._sorted
+
+        def owner_of(q: Point) -> int | None:
+            cid = comp_of.get(q)
+            return None if cid is None else index[id(sorted_of[cid])]
+
+        return _merge_specks(self.lattice, self.samples, raw, owner_of)
