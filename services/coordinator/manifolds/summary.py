@@ -139,8 +139,12 @@ def build_map(
     radius: Callable[[np.ndarray], np.ndarray],
     *,
     maxima_per_manifold: int = 3,
+    comps: list[list[Point]] | None = None,
 ) -> tuple[ManifoldMap, FineLabels, dict[Point, int]]:
-    comps = components(lattice, samples)
+    """`comps`: `grouping.components(lattice, samples)` where the caller keeps it current
+    (manifolds/incremental.py); computed here when not given."""
+    if comps is None:
+        comps = components(lattice, samples)
     provisional = {p: i for i, comp in enumerate(comps) for p in comp}
     fine = fine_labels(lattice, samples, provisional, radius)
     vols = volumes(fine, len(comps))
