@@ -11,6 +11,7 @@ from collections import Counter
 
 import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice
+from graspscape.services.coordinator.exploration.samples import point_or_none
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.service import ensure_manifolds, stored_manifolds
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
@@ -88,7 +89,10 @@ def test_refinement_follows_the_borders_only(sessions, named_object) -> None:
     extra = [k for k in calls if k not in coarse]
     assert extra and len(calls) < 0.5 * dense
     viable = {k: v for k, _, v, _ in poses}
-    deepest = [p for p in (lattice.point(_pose(k)) for k in extra) if lattice.birth(p) == 2]
+    # (Certification's jitters are off the lattice: not refinement's, left out here.)
+    on_lattice = [p for p in (point_or_none(lattice, _pose(k)) for k in extra) if p is not None]
+    assert len(on_lattice) < len(extra)  # there were jitters
+    deepest = [p for p in on_lattice if lattice.birth(p) == 2]
     assert deepest
     on_border = 0
     for p in deepest:
