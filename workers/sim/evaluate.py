@@ -182,7 +182,10 @@ class Evaluator:
             return not self._penetrating()
 
         step, tolerance = settings.backoff_step_m, settings.clearance_tolerance_m
-        touching = first_clear_gap(clear, 0.0, step, settings.max_backoff_m, tolerance)
+        # As far out as the back-off may go (the nominal palm gap + max_backoff_m: where the
+        # ray passes the mug's opening that gap is 2 cm at r = 0).
+        reach = placement.gap + settings.max_backoff_m
+        touching = first_clear_gap(clear, 0.0, step, reach, tolerance)
         # Backing off further almost always stays clear; where it does not (a finger moving
         # back into a handle), the first clear gap beyond is taken the same way.
         gap = None if touching is None else first_clear_gap(
