@@ -224,11 +224,11 @@ def best(
 
 
 def _picture(exploration_id: int, session: Any, fmt: Literal["png", "svg"], cut: str,
-             phi0_deg: float, attitude: int) -> Response:
+             phi0_deg: float, attitude: int, r_mm: float | None = None) -> Response:
     from graspscape.services.coordinator.maps.picture import picture_bytes
 
     data, _, _ = picture_bytes(session, exploration_id, fmt, cut=cut,  # type: ignore[arg-type]
-                               phi0_deg=phi0_deg, attitude=attitude,
+                               phi0_deg=phi0_deg, attitude=attitude, r_mm=r_mm,
                                title=f"exploration {exploration_id}")
     media = "image/png" if fmt == "png" else "image/svg+xml"
     return Response(content=data, media_type=media)
@@ -242,20 +242,24 @@ Cut = Annotated[Literal["horizontal", "vertical"], Query(description="plane of t
 Phi0 = Annotated[float, Query(ge=-360.0, le=360.0, allow_inf_nan=False,
                               description="azimuth of a vertical cut, °")]
 AttitudeQ = Annotated[int, Query(ge=0, le=1000, description="attitude index of the cut")]
+RMm = Annotated[float | None, Query(ge=-1e6, le=1e6, allow_inf_nan=False,
+                                    description="draw only the cut's band at this r, mm "
+                                    "(nearest level of the finest lattice; 422 outside the "
+                                    "grid's r range); default: every r")]
 
 
 @router.get("/explorations/{exploration_id}/map.png", response_class=Response,
             responses=_PICTURE_RESPONSES, summary="The behavioral map (cut and 3D view), PNG")
 def map_png(exploration_id: Id, session: SessionDep, cut: Cut = "horizontal", phi0_deg: Phi0 = 0.0,
-            attitude: AttitudeQ = 0) -> Response:
-    return _picture(exploration_id, session, "png", cut, phi0_deg, attitude)
+            attitude: AttitudeQ = 0, r_mm: RMm = None) -> Response:
+    return _picture(exploration_id, session, "png", cut, phi0_deg, attitude, r_mm)
 
 
 @router.get("/explorations/{exploration_id}/map.svg", response_class=Response,
             responses=_PICTURE_RESPONSES, summary="The behavioral map (cut and 3D view), SVG")
 def map_svg(exploration_id: Id, session: SessionDep, cut: Cut = "horizontal", phi0_deg: Phi0 = 0.0,
-            attitude: AttitudeQ = 0) -> Response:
-    return _picture(exploration_id, session, "svg", cut, phi0_deg, attitude)
+            attitude: AttitudeQ = 0, r_mm: RMm = None) -> Response:
+    return _picture(exploration_id, session, "svg", cut, phi0_deg, attitude, r_mm)
 
 
 def _stream_poses(exploration_id: int, request: Request, session: Any,

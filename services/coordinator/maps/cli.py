@@ -1,6 +1,6 @@
 """`graspscape map`: pictures, exports and local runs of behavioral maps from the command line.
 
-  graspscape map show ID [-o map.png|map.svg] [--cut vertical --phi0 90] [--attitude 0]
+  graspscape map show ID [-o map.png|map.svg] [--cut vertical --phi0 90] [--attitude 0] [--r-mm 10]
   graspscape map export ID --what poses.csv|poses.parquet|manifolds.json -o FILE
   graspscape map export ID --what graspgen.json|acronym.h5|object.obj -o FILE
   graspscape map run --object mug [--dtheta 30 --levels 2 …] -o map.png [--db run.db]
@@ -55,6 +55,8 @@ def picture_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cut", choices=["horizontal", "vertical"], default="horizontal")
     parser.add_argument("--phi0", type=float, default=0.0, help="vertical cut azimuth, degrees")
     parser.add_argument("--attitude", type=int, default=0, help="attitude index of the cut")
+    parser.add_argument("--r-mm", type=float, default=None,
+                        help="draw only the cut's band at this r, mm (default: every r)")
 
 
 def _sessions(url: str | None) -> Any:
@@ -76,7 +78,8 @@ def write_picture(sessions: Any, exploration_id: int, args: argparse.Namespace) 
 
     with sessions() as session:
         manifolds, poses = write_map_files(session, exploration_id, args.out, cut=args.cut,
-                                           phi0_deg=args.phi0, attitude=args.attitude)
+                                           phi0_deg=args.phi0, attitude=args.attitude,
+                                           r_mm=getattr(args, "r_mm", None))
         table = table_text(stored_manifolds(session, exploration_id))
     print(f"{args.out}: {manifolds} manifolds, {poses} poses")
     if table:

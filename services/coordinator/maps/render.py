@@ -13,6 +13,8 @@ fragile pixels are stippled, uncertain ones washed grey. A local maximum is draw
 lies in the cut (`maxima_in_cut`): of the cut's attitude, its direction within half a finest
 step of the plane, placed where the cut draws that direction and r (so never inside the
 object's outline or a handle's hole), and only on a pixel of its own manifold.
+A cut may be narrowed to one r level (`r_level`, a level of the finest lattice): only the band
+of pixels within half a finest r step of it is drawn, and only the maxima at that level.
 The 3D view shows the viable reference-point positions coloured by manifold (thinned beyond
 SCATTER_MAX markers). The poses come as arrays (`maps.points`) with their stored labels.
 """
@@ -68,8 +70,10 @@ def cut_field(
     phi0: float = 0.0,
     attitude: int = 0,
     pixels: int = PIXELS,
+    r_level: float | None = None,
 ) -> dict[str, Any]:
-    """Label and μs per pixel of the cut (NaN outside the explored shell)."""
+    """Label and μs per pixel of the cut (NaN outside the explored shell, or outside the band
+    of `r_level` where one is given)."""
     e1, e2 = _plane_basis(cut, phi0)
     psi = np.linspace(0, 2 * math.pi, 721)[:-1]
     ring_dirs = np.outer(np.cos(psi), e1) + np.outer(np.sin(psi), e2)
@@ -84,6 +88,8 @@ def cut_field(
     r = d - rho
     half = lattice.dr(lattice.depth) / 2
     inside = (r >= lattice.grid.r_min - half) & (r <= lattice.grid.r_max + half)
+    if r_level is not None:
+        inside &= np.abs(r - r_level) <= half
     dirs = (np.outer(np.cos(ang.ravel()), e1) + np.outer(np.sin(ang.ravel()), e2))
     labels = np.full(X.shape, np.nan)
     mu = np.full(X.shape, np.nan)
@@ -107,7 +113,7 @@ def cut_field(
             robust.ravel()[idx] = known.robust[nn[:, 0]]
     return {"X": X, "Y": Y, "labels": labels, "mu": mu, "extent": extent, "e1": e1, "e2": e2,
             "inside": inside, "robust": robust, "psi": psi, "rho_ring": rho_ring,
-            "attitude": attitude}
+            "attitude": attitude, "r_level": r_level}
 
 
 def maxima_in_cut(field: dict[str, Any], manifolds: list[ManifoldSummary],
@@ -122,6 +128,7 @@ def maxima_in_cut(field: dict[str, Any], manifolds: list[ManifoldSummary],
     e1, e2 = field["e1"], field["e2"]
     normal = np.cross(e1, e2)
     band = lattice.dtheta(lattice.depth) / 2 + 1e-9
+    r_band = lattice.dr(lattice.depth) / 2 + 1e-9
     roll0, pitch0, yaw0 = lattice.attitudes[field["attitude"]]
     psi, rho_ring = field["psi"], field["rho_ring"]
     xs = X[0]
@@ -135,6 +142,8 @@ def maxima_in_cut(field: dict[str, Any], manifolds: list[ManifoldSummary],
             u = np.array([math.sin(pm.theta) * math.cos(pm.phi),
                           math.sin(pm.theta) * math.sin(pm.phi), math.cos(pm.theta)])
             if abs(math.asin(max(-1.0, min(1.0, float(u @ normal))))) > band:
+                continue
+            if field.get("r_level") is not None and abs(pm.r - field["r_level"]) > r_band:
                 continue
             a, b = float(u @ e1), float(u @ e2)
             if math.hypot(a, b) < 1e-12:
@@ -264,13 +273,16 @@ def render_map(
     fmt: Literal["png", "svg"] = "png",
     title: str = "",
     pixels: int = PIXELS,
+    r_level: float | None = None,
 ) -> bytes:
     field = cut_field(lattice, points, mesh, cut=cut, phi0=phi0,
-                      attitude=attitude, pixels=pixels)
+                      attitude=attitude, pixels=pixels, r_level=r_level)
     fig = plt.figure(figsize=(12, 5.6))
     ax = fig.add_subplot(1, 2, 1)
     roll = lattice.attitudes[attitude][0]
     where = "z = 0" if cut == "horizontal" else f"vertical plane at φ = {math.degrees(phi0):.0f}°"
+    if r_level is not None:
+        where += f", r = {r_level * 1000:g} mm"
     _draw_cut(ax, field, manifolds, lattice, mesh,
               f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")

@@ -242,18 +242,28 @@ async function viewExploration(id) {
     el("option", { value: "vertical" }, "vertical (through φ0)"));
   const phi0 = el("input", { id: "phi0", type: "number", min: -360, max: 360, step: 5, value: 0 });
   const attitude = el("input", { id: "attitude", type: "number", min: 0, max: attitudes - 1, step: 1, value: 0 });
+  // The grid's coarse r levels (on the finest lattice too); "" draws every r.
+  const rLevels = [];
+  for (let k = 0; grid.r_min + k * grid.dr <= grid.r_max + 1e-9 && k < 200; k++) {
+    rLevels.push(Math.round((grid.r_min + k * grid.dr) * 1e4) / 10);
+    if (!(grid.dr > 0)) break;
+  }
+  const rCut = el("select", { id: "r_mm" }, el("option", { value: "" }, "every r"),
+    rLevels.map((r) => el("option", { value: String(r) }, `${r} mm`)));
   const img = el("img", { id: "map", alt: "behavioral map: a cut through pose space and a 3D view", "data-testid": "map" });
   img.addEventListener("load", () => { img.dataset.loaded = "1"; });
   const drawMap = () => {
     img.dataset.loaded = "";
     img.src = `/explorations/${id}/map.png?cut=${cut.value}&phi0_deg=${Number(phi0.value) || 0}` +
-      `&attitude=${Math.min(attitudes - 1, Math.max(0, Number(attitude.value) || 0))}&v=${detail.poses_done}`;
+      `&attitude=${Math.min(attitudes - 1, Math.max(0, Number(attitude.value) || 0))}` +
+      (rCut.value !== "" ? `&r_mm=${rCut.value}` : "") + `&v=${detail.poses_done}`;
   };
   const controls = el("form", { class: "controls", onsubmit: (e) => { e.preventDefault(); drawMap(); } },
     el("label", {}, "Cut", cut), el("label", {}, "φ0 (vertical cut), °", phi0),
     el("label", {}, `Attitude (0–${attitudes - 1})`, attitude),
+    el("label", {}, "r", rCut),
     el("button", { type: "submit" }, "Draw"));
-  for (const c of [cut, attitude]) c.addEventListener("change", drawMap);
+  for (const c of [cut, attitude, rCut]) c.addEventListener("change", drawMap);
   const graspBox = el("section", { "aria-live": "polite", "data-testid": "grasp" },
     el("p", { class: "note" }, "Choose a manifold (or click a point in the 3D view) to see its grasp."));
   const tableBox = el("div", {}, el("p", {}, "Loading manifolds…"));

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from graspscape.services.coordinator.errors import InvalidInput
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.samples import point_or_none
+from graspscape.services.coordinator.exploration.samples import lattice_of, point_or_none
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.service import compute_map
@@ -196,3 +196,40 @@ def test_the_cut_carries_the_robust_labels_and_shades_them() -> None:
     shades = drawn(field)
     assert len(shades) == 2 and [list(c.hatches) for c in shades] == [[None], ["."]]
     assert drawn({**field, "robust": np.zeros_like(field["robust"])}) == []
+
+
+def test_the_map_routes_cut_at_one_r(client, sessions, named_object) -> None:
+    """`r_mm` narrows the cut to the band of one r level of the finest lattice (10 mm steps
+    here): snapped to the nearest level, refused beyond the grid's r range. One picture drawn
+    (a few seconds under load): the snapped request is the kept one."""
+    spec = ExplorationSpec(object_id=named_object("sphere"),
+                           grid={"dtheta": math.radians(90), "r_min": 0.0, "r_max": 0.02,
+                                 "dr": 0.01},
+                           refinement={"levels": 0, "local_search_rounds": 0})
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=40, max_poses=10**6).id
+        while tiles := lease_tiles(s, worker_id="w", n=8, lease_seconds=60):
+            for t in tiles:
+                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                               results=[oracle_result(p) for p in t.poses()])
+    at_10 = client.get(f"/explorations/{eid}/map.png", params={"r_mm": 10})
+    assert at_10.status_code == 200, at_10.text
+    assert at_10.headers["content-type"] == "image/png" and at_10.content[:4] == b"\x89PNG"
+    # 13 mm is the 10 mm level: the same picture, as kept.
+    assert client.get(f"/explorations/{eid}/map.png", params={"r_mm": 13}).content == \
+        at_10.content
+    for bad in (26, -6, 1e5):
+        refused = client.get(f"/explorations/{eid}/map.svg", params={"r_mm": bad})
+        assert refused.status_code == 422, refused.text
+        assert "r_mm" in refused.text and "out of range" in refused.text
+    # The band holds only pixels at that r, a part of the whole shell.
+    with sessions() as s:
+        lattice = lattice_of(spec)
+        points = stored_points(s, eid, lattice)
+    assert {round(float(r), 3) for r in points.r} == {0.0, 0.01, 0.02}
+    full = render.cut_field(lattice, points, None, pixels=80)
+    band = render.cut_field(lattice, points, None, pixels=80, r_level=0.01)
+    assert band["inside"].sum() > 0 and not (band["inside"] & ~full["inside"]).any()
+    assert band["inside"].sum() < full["inside"].sum() / 2
+    drawn = np.isfinite(band["labels"])
+    assert drawn.any() and not (drawn & ~band["inside"]).any()

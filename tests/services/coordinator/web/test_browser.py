@@ -85,6 +85,10 @@ def test_best_grasp_picture(stack: LiveStack, sphere: dict[str, Any],
     assert stack.wait_finished(eid)["status"] == "done"
     p.goto(f"{stack.base}/#/exploration/{eid}")
     p.locator("img[data-testid=map][data-loaded='1']").wait_for()
+    # The r control redraws the cut at one r level (the grid's 10 and 20 mm).
+    assert p.locator("#r_mm option").all_inner_texts() == ["every r", "10 mm", "20 mm"]
+    p.locator("#r_mm").select_option("20")
+    p.locator("img[data-testid=map][data-loaded='1'][src*='r_mm=20']").wait_for()
     p.get_by_test_id("best-A").focus()
     p.keyboard.press("Enter")  # keyboard, not the mouse
     picture = p.locator("img[data-testid=grasp-picture][data-loaded='1']")
