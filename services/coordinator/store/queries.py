@@ -65,7 +65,10 @@ def _passes(ranking: Ranking) -> Iterator[tuple[list[Any], list[Any]]]:
         value = getattr(PoseRow, ranking.value)
         first = value.asc() if ranking.lower_is_better else value.desc()
         yield [*where, value.is_not(None)], [first, *mu_s_order]
-        yield [*where, value.is_(None)], mu_s_order
+        # Every value here is NULL, so ordering by it changes nothing, but it keeps the ORDER BY
+        # the index's own: PostgreSQL does not count `IS NULL` as an equality that fixes the
+        # first key, and sorted the rows instead of reading them in index order.
+        yield [*where, value.is_(None)], [first, *mu_s_order]
 
 
 def best_pose_ids(
