@@ -17,8 +17,9 @@ from __future__ import annotations
 import math
 import string
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
@@ -92,6 +93,8 @@ def _merge_specks(
     samples: Mapping[Point, StoredPose],
     comps: list[list[Point]],
     owner_of: Callable[[Point], int | None] | None = None,
+    neighbours_of: Callable[[Point], Iterable[Point]] | None = None,
+    near: Callable[[Point, Point], bool] | None = None,
 ) -> list[list[Point]]:
     """Fold specks (fewer than max(MIN_POSES, MIN_SHARE of the viable poses) members) into
     the larger neighbouring component they nearly match most often (same digits, joints
@@ -100,25 +103,28 @@ def _merge_specks(
 
     `owner_of(q)` is the index into `comps` of q's component (None: not viable); a caller
     that keeps the components (manifolds/incremental.py) passes its own instead of the
-    index built here over every point. Components not merged are returned as given (the
-    same list objects, already sorted)."""
+    index built here over every point, and may pass its caches of p's lattice neighbours at
+    all its levels (`neighbours_of`) and of the tolerance test (`near`). Components not
+    merged are returned as given (the same list objects, already sorted)."""
     n_viable = sum(len(c) for c in comps)
     small = max(MIN_POSES, math.ceil(MIN_SHARE * n_viable))
     if owner_of is None:
         owner_of = {p: i for i, c in enumerate(comps) for p in c}.get
+    if neighbours_of is None:
+        neighbours_of = partial(speck_neighbours, lattice)
+    if near is None:
+        def near(p: Point, q: Point) -> bool:
+            return same_behaviour(samples[p], samples[q], SPECK_TOLERANCE_RAD)
     merged: dict[int, int] = {}
     for i, comp in enumerate(comps):
         if len(comp) >= small:
             continue
         votes: Counter[int] = Counter()
         for p in comp:
-            for level in range(lattice.birth(p), lattice.depth + 1):
-                for _, q in lattice.neighbours(p, level):
-                    j = owner_of(q)
-                    if j is not None and j != i and len(comps[j]) >= small and same_behaviour(
-                        samples[p], samples[q], SPECK_TOLERANCE_RAD
-                    ):
-                        votes[j] += 1
+            for q in neighbours_of(p):
+                j = owner_of(q)
+                if j is not None and j != i and len(comps[j]) >= small and near(p, q):
+                    votes[j] += 1
         if votes:
             merged[i] = min(votes, key=lambda j: (-votes[j], j))
     if not merged:  # the usual case: every component as it is, in its order
@@ -127,6 +133,13 @@ def _merge_specks(
     for i, comp in enumerate(comps):
         out.setdefault(merged.get(i, i), []).extend(comp)
     return sorted((sorted(c) for c in out.values()), key=lambda g: g[0])
+
+
+def speck_neighbours(lattice: Lattice, p: Point) -> list[Point]:
+    """p's lattice neighbours at every level from its birth (a speck's vote goes to their
+    components), with repeats as the levels give them."""
+    return [q for level in range(lattice.birth(p), lattice.depth + 1)
+            for _, q in lattice.neighbours(p, level)]
 
 
 def surface_radii(mesh: object | None, directions: np.ndarray, fallback: float) -> np.ndarray:

@@ -23,12 +23,18 @@ same result changes nothing, with a different one the state is rebuilt from ever
 
 from __future__ import annotations
 
+import threading
+from bisect import bisect_left, insort
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Hashable, Iterable, Mapping
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
-from graspscape.services.coordinator.manifolds.grouping import _merge_specks
+from graspscape.services.coordinator.manifolds.grouping import (
+    SPECK_TOLERANCE_RAD,
+    _merge_specks,
+    speck_neighbours,
+)
 
 Pair = tuple[Point, Point]
 
@@ -51,8 +57,10 @@ class IncrementalGrouping:
         self._cutters: dict[Point, list[Pair]] = {}
         self._comp_of: dict[Point, int] = {}
         self._members: dict[int, set[Point]] = {}
-        self._sorted: dict[int, list[Point]] = {}  # cache of sorted(members), per component
+        self._sorted: dict[int, list[Point]] = {}  # sorted(members), per component
         self._next_id = 0
+        self._speck_nbrs: dict[Point, list[Point]] = {}
+        self._speck_near: dict[Pair, bool] = {}
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -74,19 +82,25 @@ class IncrementalGrouping:
         for p, s in new.items():
             if s.viable:
                 self._new_component(p)
-        # Links of the new points, each directed link once: outgoing of every new point,
-        # incoming from points stored before this batch.
+        # Links of the new points, each directed link once: p → q of every new point, and
+        # q → p from the points stored before this batch. The neighbour relation is
+        # symmetric level by level (q is p's level-L neighbour iff p is q's: the tests check
+        # it), so p's own neighbour lists find both.
+        lat, samples = self.lattice, self.samples
         for p in sorted(new):
             if not new[p].viable:
                 continue
-            for q, mid in self._outgoing(p):
-                self._link(p, q, mid)
-            for q in self._candidates(p):
-                if q in new:
-                    continue
-                for target, mid in self._outgoing(q):
-                    if target == p:
-                        self._link(q, p, mid)
+            for level in range(lat.birth(p), lat.depth + 1):
+                for _, q in lat.neighbours(p, level):
+                    b = samples.get(q)
+                    if b is None or not b.viable:
+                        continue
+                    self._link(p, q, lat.midpoint(p, q, level))
+                    if q not in new:
+                        self._link(q, p, lat.midpoint(q, p, level))
+            for q in lat.attitude_neighbours(p):  # never cut: one link is enough
+                if q in samples:
+                    self._link(p, q, None)
         # Then the links the new points cut (all of them made before this batch).
         cut: list[Pair] = []
         for m in new:
@@ -102,33 +116,11 @@ class IncrementalGrouping:
         fresh.add(samples.items())
         self.__dict__.update(fresh.__dict__)
 
-    def _candidates(self, p: Point) -> set[Point]:
-        """Stored viable points that may link to p: its own neighbours at its levels (the
-        neighbour relation is symmetric: tests/…/test_incremental.py checks it)."""
-        lat = self.lattice
-        out: set[Point] = set()
-        for level in range(lat.birth(p), lat.depth + 1):
-            out.update(q for _, q in lat.neighbours(p, level))
-        out.update(lat.attitude_neighbours(p))
-        out.discard(p)
-        return {q for q in out if (s := self.samples.get(q)) is not None and s.viable}
-
-    def _outgoing(self, p: Point) -> list[tuple[Point, Point | None]]:
-        """p's links as `grouping.components` makes them, to stored points: (q, the midpoint
-        that cuts it or None), those already cut left out; same behaviour not yet checked."""
-        lat, samples = self.lattice, self.samples
-        out: list[tuple[Point, Point | None]] = []
-        for level in range(lat.birth(p), lat.depth + 1):
-            for _, q in lat.neighbours(p, level):
-                if q not in samples:
-                    continue
-                mid = lat.midpoint(p, q, level)
-                if mid is None or mid not in samples:
-                    out.append((q, mid))
-        out += [(q, None) for q in lat.attitude_neighbours(p) if q in samples]
-        return out
-
     def _link(self, p: Point, q: Point, mid: Point | None) -> None:
+        """Link p → q as `grouping.components` does: both viable, the same behaviour, and
+        the midpoint between them (if any) not stored."""
+        if mid is not None and mid in self.samples:
+            return
         a, b = self.samples[p], self.samples[q]
         if not (a.viable and b.viable and same_behaviour(a, b)):
             return
@@ -160,6 +152,7 @@ class IncrementalGrouping:
         self._next_id += 1
         self._comp_of[p] = cid
         self._members[cid] = {p}
+        self._sorted[cid] = [p]
 
     def _join(self, p: Point, q: Point) -> None:
         a, b = self._comp_of[p], self._comp_of[q]
@@ -168,10 +161,10 @@ class IncrementalGrouping:
         if len(self._members[a]) < len(self._members[b]):
             a, b = b, a
         moved = self._members.pop(b)
-        self._sorted.pop(b, None)
-        self._sorted.pop(a, None)
-        for x in moved:
+        into = self._sorted[a]
+        for x in self._sorted.pop(b):  # the smaller into the larger: log n steps each
             self._comp_of[x] = a
+            insort(into, x)
         self._members[a] |= moved
 
     def _split(self, p: Point, q: Point) -> None:
@@ -196,24 +189,20 @@ class IncrementalGrouping:
     def _detach(self, part: set[Point]) -> None:
         old = self._comp_of[next(iter(part))]
         self._members[old] -= part
-        self._sorted.pop(old, None)
+        rest = self._sorted[old]
+        for x in part:  # the part that ran out first: the smaller one
+            del rest[bisect_left(rest, x)]
         cid = self._next_id
         self._next_id += 1
         self._members[cid] = part
+        self._sorted[cid] = sorted(part)
         for x in part:
             self._comp_of[x] = cid
 
     # --- reading ---------------------------------------------------------------------------
     def raw_components(self) -> list[list[Point]]:
         """The linked components before speck folding, each sorted, by their first point."""
-        out = []
-        for cid, members in self._members.items():
-            comp = self._sorted.get(cid)
-            if comp is None:
-                comp = self._sorted[cid] = sorted(members)
-            out.append(comp)
-        out.sort(key=lambda c: c[0])
-        return out
+        return sorted(self._sorted.values(), key=lambda c: c[0])
 
     def components(self) -> list[list[Point]]:
         """What `grouping.components(lattice, samples)` gives for every sample fed so far.
@@ -226,4 +215,58 @@ class IncrementalGrouping:
             cid = comp_of.get(q)
             return None if cid is None else index[id(sorted_of[cid])]
 
-        return _merge_specks(self.lattice, self.samples, raw, owner_of)
+        # The specks' neighbour lists and tolerance tests, kept from one call to the next
+        # for the points still in specks (lattice geometry and stored results do not change).
+        old_nbrs, old_near = self._speck_nbrs, self._speck_near
+        nbrs: dict[Point, list[Point]] = {}
+        near_of: dict[Pair, bool] = {}
+
+        def neighbours_of(p: Point) -> list[Point]:
+            got = nbrs.get(p)
+            if got is None:
+                got = old_nbrs.get(p)
+                if got is None:
+                    got = speck_neighbours(self.lattice, p)
+                nbrs[p] = got
+            return got
+
+        def near(p: Point, q: Point) -> bool:
+            got = near_of.get((p, q))
+            if got is None:
+                got = old_near.get((p, q))
+                if got is None:
+                    got = same_behaviour(self.samples[p], self.samples[q], SPECK_TOLERANCE_RAD)
+                near_of[(p, q)] = got
+            return got
+
+        out = _merge_specks(self.lattice, self.samples, raw, owner_of, neighbours_of, near)
+        self._speck_nbrs, self._speck_near = nbrs, near_of
+        return out
+
+
+class GroupingCache:
+    """Per-process states by a caller's key (the coordinator: database, exploration id and
+    creation time), the least recently used dropped beyond `size`. `components` feeds a
+    state the samples it has not seen and answers its components; a state whose samples are
+    not all among those given (another database, a rebuilt store) starts again from them, so
+    a restart or a cold cache only costs one full grouping. Thread-safe."""
+
+    def __init__(self, size: int = 8) -> None:
+        self.size = size
+        self._states: dict[Hashable, IncrementalGrouping] = {}
+        self._lock = threading.Lock()
+
+    def components(
+        self, key: Hashable, lattice: Lattice, samples: Mapping[Point, StoredPose]
+    ) -> list[list[Point]]:
+        with self._lock:
+            state = self._states.pop(key, None)
+            if (state is None or state.lattice != lattice
+                    or not state.samples.keys() <= samples.keys()):
+                state = IncrementalGrouping(lattice)
+            seen = state.samples
+            state.add((p, s) for p, s in samples.items() if p not in seen)
+            self._states[key] = state  # most recent last
+            while len(self._states) > self.size:
+                del self._states[next(iter(self._states))]
+            return state.components()

@@ -27,6 +27,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
     FineLabels,
     surface_radii,
 )
+from graspscape.services.coordinator.manifolds.incremental import GroupingCache
 from graspscape.services.coordinator.manifolds.robust import (
     Neighbourhoods,
     RobustLabel,
@@ -62,6 +63,9 @@ REFRESH_EVERY_TILES = 10  # the first incremental refresh: at the 10th finished 
 REFRESH_GROWTH = 0.25
 FALLBACK_RADIUS_M = FALLBACK_RADIUS
 _KEY_CHUNK = 500
+# Grouping states of the explorations this process refreshes (the coordinator's, the local
+# runner's): after a restart the first refresh groups the whole map once.
+GROUPINGS = GroupingCache()
 
 
 def radius_function(mesh: Any | None) -> Any:
@@ -93,9 +97,13 @@ def compute_map(
     lattice = lattice_of(spec)
     samples = samples if samples is not None else load_samples(session, exploration_id, lattice)
     mesh = object_mesh(session, row.object_id)
+    # Grouping from the process's incremental state: only the poses stored since the last
+    # refresh are linked in (manifolds/incremental.py); the rest of the map is recomputed.
+    key = (str(session.get_bind().url), exploration_id, row.created_at)
+    comps = GROUPINGS.components(key, lattice, samples)
     mmap, fine, label_of = build_map(
         lattice, samples, radius_function(mesh),
-        maxima_per_manifold=spec.refinement.local_search_starts,
+        maxima_per_manifold=spec.refinement.local_search_starts, comps=comps,
     )
     return ComputedMap(spec, lattice, samples, mmap, fine, label_of, mesh)
 

@@ -10,7 +10,10 @@ import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import components
-from graspscape.services.coordinator.manifolds.incremental import IncrementalGrouping
+from graspscape.services.coordinator.manifolds.incremental import (
+    GroupingCache,
+    IncrementalGrouping,
+)
 from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
 
 GRIDS = {
@@ -84,15 +87,15 @@ def check_arrivals(lattice: Lattice, samples: dict[Point, StoredPose], seed: int
 
 
 def neighbours_are_symmetric(lattice: Lattice) -> None:
-    """The incremental state finds the links into a new point among its own neighbours."""
-    back: dict[Point, set[Point]] = {}
+    """q is p's level-L neighbour iff p is q's: the incremental state finds the links into
+    a new point in its own neighbour lists."""
+    back: dict[tuple[Point, int], set[Point]] = {}
     for p in finest_points(lattice):
         for level in range(lattice.birth(p), lattice.depth + 1):
             for _, q in lattice.neighbours(p, level):
-                if q not in back:
-                    back[q] = {x for lv in range(lattice.birth(q), lattice.depth + 1)
-                               for _, x in lattice.neighbours(q, lv)}
-                assert p in back[q], (p, q, level)
+                if (q, level) not in back:
+                    back[(q, level)] = {x for _, x in lattice.neighbours(q, level)}
+                assert p in back[(q, level)], (p, q, level)
 
 
 def test_neighbours_are_symmetric() -> None:
@@ -152,3 +155,17 @@ def test_shuffled_arrivals_randomized(name: str, depth: int, seed: int) -> None:
     rng = random.Random(1000 * seed + depth)
     samples = sampled(lattice, rng, share=rng.uniform(0.2, 0.9))
     check_arrivals(lattice, samples, seed)
+
+
+def test_the_cache_feeds_what_is_new_and_starts_again_on_another_store() -> None:
+    lattice = Lattice(GRIDS["60deg-2r-2rolls"], 1)
+    full = field(lattice, random.Random(11))
+    coarse = {p: s for p, s in full.items() if lattice.birth(p) == 0}
+    cache = GroupingCache(size=1)
+    assert cache.components("x", lattice, coarse) == components(lattice, coarse)
+    assert cache.components("x", lattice, full) == components(lattice, full)
+    # Fewer samples under the same key (a store rebuilt): grouped again from them alone.
+    part = {p: s for p, s in full.items() if p.attitude == 0}
+    assert cache.components("x", lattice, part) == components(lattice, part)
+    assert cache.components("y", lattice, coarse) == components(lattice, coarse)
+    assert list(cache._states) == ["y"]
