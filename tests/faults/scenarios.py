@@ -45,6 +45,9 @@ from tests.faults.support import (
 # Only the workers' and coordinator's own sessions: the password of the namespace run's
 # zenoh login (it listens beyond loopback, so `serve` demands one).
 PASSWORD = "faults-" + os.urandom(6).hex()
+# Starting the coordinator and the workers (Python imports) took up to ~2 minutes on the
+# shared 2-core VM at a load average of 30: the first progress is waited for this long.
+STARTUP_S = 400
 
 
 def free_port() -> int:
@@ -122,7 +125,7 @@ def link_cut(work: Path, cut_s: float, *, dtheta_deg: float = 20.0, tile_poses: 
                     pose_s=pose_s)), work / f"worker{i}.log", env))
             # Worker 0 at work: one tile of its stored, then a tile of its none of whose
             # poses is stored yet.
-            wait_for(lambda: stored_by(sessions, exploration_id, "w0-") > 0, 120,
+            wait_for(lambda: stored_by(sessions, exploration_id, "w0-") > 0, STARTUP_S,
                      "worker 0's first tile")
 
             def fresh_tile() -> list:
@@ -181,7 +184,7 @@ def router_restart(work: Path, down_s: float, *, dtheta_deg: float = 30.0,
             children.append(Child(worker_args(router_endpoint, f"w{i}", work / "cache",
                                               pose_s=pose_s), work / f"worker{i}.log"))
         total = tally(sessions, exploration_id).planned
-        wait_for(lambda: stored(sessions, exploration_id) >= total // 4, 180,
+        wait_for(lambda: stored(sessions, exploration_id) >= total // 4, STARTUP_S,
                  "a quarter of the poses")
         router.kill()
         killed_at = time.monotonic()
@@ -223,7 +226,7 @@ def postgres_restart(work: Path, down_s: float, *, dtheta_deg: float = 30.0,
                 children.append(Child(worker_args(zenoh_endpoint, f"w{i}", work / "cache",
                                                   pose_s=pose_s), work / f"worker{i}.log"))
             total = tally(sessions, exploration_id).planned
-            wait_for(lambda: stored(sessions, exploration_id) >= total // 4, 180,
+            wait_for(lambda: stored(sessions, exploration_id) >= total // 4, STARTUP_S,
                      "a quarter of the poses")
             base = stored(sessions, exploration_id)
             engine.dispose()

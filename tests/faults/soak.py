@@ -116,7 +116,7 @@ def soak(work: Path, *, tiles: int, procs: int = 3, kill_every_tiles: int | None
     loop_s: list[float] = []
     next_kill, victim = kill_every_tiles, 1
     try:
-        wait_for(lambda: 0 in _process_ids(worker.output()), 120, "the worker's processes")
+        wait_for(lambda: 0 in _process_ids(worker.output()), 400, "the worker's processes")
         started = time.monotonic()  # the processes are up: the time of the tiles alone
         while True:
             loop_at = time.monotonic()

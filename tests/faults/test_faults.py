@@ -21,6 +21,7 @@ def has_postgres_server() -> bool:
 
 pytestmark = [
     pytest.mark.slow,
+    pytest.mark.timeout(900),  # process start-up alone took minutes on the loaded VM
     pytest.mark.skipif(os.geteuid() != 0, reason="network namespaces and postgres need root"),
 ]
 

@@ -15,6 +15,7 @@ from tests.faults.soak import soak_isolated
 
 pytestmark = [
     pytest.mark.slow,
+    pytest.mark.timeout(900),  # process start-up alone took minutes on the loaded VM
     pytest.mark.skipif(os.geteuid() != 0 or any(shutil.which(tool) is None for tool in (
         "ss", "unshare", "fuser")), reason="needs root, ss, unshare and fuser"),
 ]
