@@ -130,6 +130,9 @@ def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
                                                        reverse=True)
     with sessions() as s:
         c = compute_map(s, eid)
+        # Certification's jitters: evaluated and exported, off the lattice (no manifold).
+        jitters = len(s.scalars(select(PoseRow.id).where(
+            PoseRow.exploration_id == eid, PoseRow.certifies.is_not(None))).all())
     head_on, _ = _at(c, 90, 0)  # straight at the handle
     handle = c.label_of[head_on]
     body = 0
@@ -148,7 +151,8 @@ def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
 
     best = client.get(f"/explorations/{eid}/best",
                       params={"limit": 3, "rank": "mu_s"}).json()["poses"]
-    assert len(best) == 3 and best[0]["mu_s"] == max(m["mu_s_max"] for m in table)
+    # (A jitter off the lattice may beat every manifold member.)
+    assert len(best) == 3 and best[0]["mu_s"] >= max(m["mu_s_max"] for m in table)
     # From above only (approach direction within 60° of −z), and a low effort cap.
     cone = client.get(f"/explorations/{eid}/best", params={
         "cone_x": 0, "cone_y": 0, "cone_z": -1, "cone_half_angle_deg": 60, "limit": 50}).json()
@@ -172,7 +176,7 @@ def test_mug_handle_is_its_own_manifold_and_the_api_serves_the_map(
 
     rows = list(csv.DictReader(io.StringIO(
         client.get(f"/explorations/{eid}/export/poses.csv").text)))
-    assert len(rows) == len(c.samples)
+    assert len(rows) == len(c.samples) + jitters
     assert {r["manifold"] for r in rows if r["viable"] == "True"} >= {"A", "B"}
     parquet = pq.read_table(io.BytesIO(
         client.get(f"/explorations/{eid}/export/poses.parquet").content))
