@@ -3,7 +3,9 @@
 `refresh_manifolds` replaces the exploration's manifold rows and the poses' manifold column
 with what `summary.build_map` computes from every stored pose, and notes on the exploration
 row when (poses done, final); it runs as results arrive (throttled geometrically:
-`maybe_refresh`) and once more, final, when the exploration completes. The
+`maybe_refresh`) and once more, final, when the exploration completes. The grouping comes
+from the process's incremental state (`GROUPINGS`, manifolds/incremental.py): a refresh links
+in only the poses stored since the last one; the rest of the map is recomputed. The
 object mesh is needed only for volumes (surface radius along each approach direction); it is
 prepared once per process and object (`objects.geometry`).
 """
