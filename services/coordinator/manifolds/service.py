@@ -45,6 +45,7 @@ from graspscape.services.coordinator.manifolds.summary import (
     robust_order,
 )
 from graspscape.services.coordinator.objects.geometry import object_mesh
+from graspscape.services.coordinator.store import queries
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
     ExplorationRow,
@@ -52,7 +53,7 @@ from graspscape.services.coordinator.store.models import (
     PoseRow,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
-from sqlalchemy import bindparam, case, delete, select, update
+from sqlalchemy import bindparam, delete, select, update
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
@@ -334,41 +335,29 @@ def best_poses(
                                     max_effort_nm=max_effort_nm, limit=limit, coarser=coarser)
     if session.get(ExplorationRow, exploration_id) is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
-    query = select(PoseRow).where(PoseRow.exploration_id == exploration_id, PoseRow.viable)
+    manifold_id = None
     if label is not None:
-        mid = session.scalar(select(ManifoldRow.id).where(
+        manifold_id = session.scalar(select(ManifoldRow.id).where(
             ManifoldRow.exploration_id == exploration_id, ManifoldRow.label == label))
-        if mid is None:
+        if manifold_id is None:
             raise NotFound(f"exploration {exploration_id} has no manifold {label}")
-        query = query.where(PoseRow.manifold_id == mid)
-    if max_effort_nm is not None:
-        query = query.where(PoseRow.effort_max_nm <= max_effort_nm)
+    # An index walk in the ranking's order that stops at `limit` (store/queries.py,
+    # migration 0011): no sort of the exploration's poses, no JSON decoded but the winners'.
+    return queries.best_pose_rows(
+        session, exploration_id, ranking=_ranking(rank), manifold_id=manifold_id,
+        cone_axis=cone_axis, cone_half_angle=cone_half_angle, max_effort_nm=max_effort_nm,
+        limit=limit)
+
+
+def _ranking(rank: Rank) -> queries.Ranking:
+    """The store's description of a /best order (the same order the ranks document)."""
     if rank == Rank.MU_S:
-        query = query.order_by(PoseRow.mu_s.desc(), PoseRow.pose_key)
-    elif rank == Rank.ROBUST:
-        order = case({lab.value: LABEL_ORDER[lab] for lab in RobustLabel},
-                     value=PoseRow.robust_label, else_=len(LABEL_ORDER))
-        query = query.order_by(order, PoseRow.robust_q.desc().nulls_last(), PoseRow.mu_s.desc(),
-                               PoseRow.pose_key)
-    else:
-        column = getattr(PoseRow, rank.value)
-        first = column.asc() if rank in LOWER_IS_BETTER else column.desc()
-        query = query.order_by(first.nulls_last(), PoseRow.mu_s.desc(), PoseRow.pose_key)
-    out: list[PoseRow] = []
-    axis = None
-    if cone_axis is not None:
-        norm = math.sqrt(sum(c * c for c in cone_axis)) or 1.0
-        axis = tuple(c / norm for c in cone_axis)
-    cos_max = math.cos(cone_half_angle) if cone_half_angle is not None else -1.0
-    for row in session.execute(query.execution_options(yield_per=500)).scalars():
-        if axis is not None:
-            v = approach_vector(row.theta, row.phi)
-            if sum(a * b for a, b in zip(axis, v, strict=True)) < cos_max - 1e-12:
-                continue
-        out.append(row)
-        if len(out) >= limit:
-            break
-    return out
+        return queries.MU_S
+    if rank == Rank.ROBUST:
+        return queries.Ranking("robust_q", group="robust_label",
+                               group_order=tuple(label.value for label in
+                                                 sorted(RobustLabel, key=LABEL_ORDER.get)))
+    return queries.Ranking(rank.value, lower_is_better=rank in LOWER_IS_BETTER)
 
 
 def _best_robust_coarser(session: Session, exploration_id: int, *, label: int | None,
