@@ -45,9 +45,11 @@ def _rows(sessions, eid: int) -> list[PoseRow]:
         return list(s.scalars(select(PoseRow).where(PoseRow.exploration_id == eid)))
 
 
-# SQLite only in the default run (the store is the same code on both; the slow physics test
-# of every explorer runs on both databases).
+# SQLite only (the store is the same code on both; the physics test of every explorer runs on
+# both databases). Slow: importing torch and stable-baselines3 alone costs 4-5 s of CPU, the
+# default run's whole allowance; the default run keeps the tests below that need neither.
 @needs_rl
+@pytest.mark.slow
 @pytest.mark.parametrize("db_url", ["sqlite"], indirect=True)
 def test_ppo_is_seeded_repeatable_in_rollouts_and_finds_held_grasps(sessions,
                                                                     named_object) -> None:
@@ -78,7 +80,7 @@ def test_ppo_is_seeded_repeatable_in_rollouts_and_finds_held_grasps(sessions,
 
 
 @needs_rl
-@pytest.mark.slow  # the default run has one PPO test: torch's import alone is seconds
+@pytest.mark.slow  # torch's import alone is seconds
 def test_resuming_the_kept_search_equals_replaying_from_the_seed() -> None:
     spec = ExplorationSpec(object_id=1, grid=GRID,
                            strategy={"name": "ppo", "poses": 10_000, "seed": 4, "batch": 4,
