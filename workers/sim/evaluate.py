@@ -175,9 +175,8 @@ class Evaluator:
             return position + normal * (gap - placement.gap)
 
         def clear(gap: float) -> bool:
-            # "Touching" as the back-off has it (penetration_tolerance_m): with no tolerance,
-            # fingers that hang alongside a wall (from above the mug) graze it for the whole
-            # way out, and 10 points more of the mug's poses end infeasible.
+            # "Touching" as the back-off has it (penetration_tolerance_m), so both modes
+            # call the same starts clear.
             self._place(at(gap), placement.rotation)
             return not self._penetrating()
 
