@@ -76,7 +76,9 @@ def check_arrivals(lattice: Lattice, samples: dict[Point, StoredPose], seed: int
     batches = 0
     i = 0
     while i < len(order):
-        n = rng.choice((1, 3, 8, 25))
+        # Tiles of 1–25 poses on small maps; on larger ones proportionally more, so that a
+        # run compares a few dozen times (each comparison regroups everything seen).
+        n = rng.choice((1, 3, 8, 25)) * max(1, len(order) // 300)
         batch = order[i : i + n]
         i += n
         state.add((p, samples[p]) for p in batch)
