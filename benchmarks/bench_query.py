@@ -326,6 +326,8 @@ def main() -> int:
     parser.add_argument("--rebuild", action="store_true", help="build again even if kept")
     parser.add_argument("--revision", default="head",
                         help="migrate to this revision (e.g. 0010: before the query indexes)")
+    parser.add_argument("--build-only", action="store_true",
+                        help="build (or find) the databases, measure nothing, write no file")
     parser.add_argument("--serve", nargs=2, metavar=("URL", "PORT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.serve:
@@ -355,8 +357,13 @@ def main() -> int:
             figures[f"ingest_poses_per_s_{tag}"] = round(poses / seconds)
             print(f"{tag}: {poses} poses ingested in {seconds:.0f} s", flush=True)
         figures[f"poses_{tag}"] = poses
+        if args.build_only:
+            continue
         measure(url, tag, figures)
         figures[f"load_avg_1min_after_{tag}"] = _load()
+    if args.build_only:
+        print(figures)
+        return 0
     write_results("query", figures, extra={"note": (
         "uvicorn in a subprocess (one process, FastAPI's thread pool), 8 httpx client threads "
         "in the bench process on the same machine; map_png percentiles are warm (cached per "
