@@ -35,9 +35,9 @@ from graspscape.services.coordinator.exploration.certify_store import certificat
 from graspscape.services.coordinator.exploration.service import get_exploration
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.service import DEFAULT_RANK, LOWER_IS_BETTER
-from graspscape.services.coordinator.store.models import PoseRow
+from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
 from pydantic import BaseModel, Field
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 NEAR_BEST = 0.95  # "within 5 % of the final best"
@@ -55,9 +55,15 @@ class BudgetAccount(BaseModel):
     wall_time_s: float | None = Field(
         description="first lease to the last stored result; null before any")
     best_mu_s: float | None = Field(description="best μs of a viable pose")
-    rank_metric: str = Field(description="the default rank metric of /best")
+    rank_metric: str = Field(description="the point rank metric of /best (rank=point)")
     best_rank: float | None = Field(
         description="its best value over the viable poses where stored; null where none has it")
+    best_robust_q: float | None = Field(
+        default=None, description="best robust quality q_δ of a viable pose (the default rank "
+        "of /best); null where the robust map is not computed (off-lattice explorers)")
+    large_manifolds: int | None = Field(
+        default=None, description="manifolds of at least 1 % of the viable volume in the "
+        "exploration's table; null where it has none stored (off-lattice explorers)")
     grasp_types: int = Field(description="distinct sets of digits in contact among viable "
                              "poses")
     grasps: int = Field(description="viable poses found ('# of grasps')")
@@ -103,6 +109,8 @@ def account(rows: Iterable[Any], started_at: datetime | None,
         best_mu_s=best_mu,
         rank_metric=DEFAULT_RANK.value,
         best_rank=best_rank,
+        best_robust_q=max((float(r.robust_q) for r in viable
+                           if getattr(r, "robust_q", None) is not None), default=None),
         grasp_types=len({StoredPose.from_row(r).digits for r in viable}),
         grasps=len(viable),
         misses=sum(1 for r in evaluated if not r.viable),
@@ -116,6 +124,11 @@ def exploration_budget(session: Session, exploration_id: int) -> ExplorationBudg
     row = get_exploration(session, exploration_id=exploration_id)
     poses = session.scalars(select(PoseRow).where(PoseRow.exploration_id == exploration_id))
     figures = account(poses, row.started_at, set(certification_plans(session, exploration_id)))
+    large = session.scalar(select(func.count()).select_from(ManifoldRow).where(
+        ManifoldRow.exploration_id == exploration_id, ManifoldRow.large.is_(True)))
+    any_manifold = session.scalar(select(func.count()).select_from(ManifoldRow).where(
+        ManifoldRow.exploration_id == exploration_id))
+    figures.large_manifolds = large if any_manifold else None
     return ExplorationBudget(exploration_id=row.id,
                              strategy=str(row.spec.get("strategy", {}).get("name", "adaptive")),
                              status=row.status, **figures.model_dump())

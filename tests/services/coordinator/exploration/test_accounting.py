@@ -22,13 +22,14 @@ T0 = datetime(2026, 12, 1, 12, 0, 0)
 
 def _row(at_s: float, *, viable: bool, mu_s: float = 0.0, links: tuple[str, ...] = (),
          ratio: float | None = None, worker: str = "w1", outcome: str | None = None,
-         inferred_from: str | None = None) -> PoseRow:
+         inferred_from: str | None = None, robust_q: float | None = None) -> PoseRow:
     signature = {"links_in_contact": list(links), "contacts": [], "joint_angles": {}}
     return PoseRow(
         pose_key=f"k{at_s}{worker}{mu_s}", theta=1.0, phi=1.0, r=0.01, roll=0.0, pitch=0.0,
         yaw=0.0, outcome=outcome or ("held" if viable else "no_grasp"), viable=viable,
         mu_s=mu_s, effort_max_nm=1.0, signature=signature if viable else None,
-        torque_margin_ratio=ratio, worker_id=worker, inferred_from=inferred_from,
+        torque_margin_ratio=ratio, robust_q=robust_q, worker_id=worker,
+        inferred_from=inferred_from,
         eval_time_s=0.1, created_at=T0 + timedelta(seconds=at_s))
 
 
@@ -41,7 +42,8 @@ def test_account_of_hand_made_rows_gives_the_known_figures() -> None:
         # Shortcut 2 (the worker synthesized it): an evaluation; within 5 % of the best 0.8.
         _row(5, viable=True, mu_s=0.79, links=("A_2", "B_spread", "palm"), ratio=0.6,
              inferred_from="k2w10.5"),
-        _row(9, viable=True, mu_s=0.8, links=("A_1", "B_3", "C_2")),  # the best, no margin
+        # The best μs, no margin; its robust quality is the best stored one.
+        _row(9, viable=True, mu_s=0.8, links=("A_1", "B_3", "C_2"), robust_q=0.42),
         _row(12, viable=False, outcome="error"),  # a miss too; the last result
     ]
     # Two poses planned for certification: the evaluated one counts, the copy does not.
@@ -50,6 +52,7 @@ def test_account_of_hand_made_rows_gives_the_known_figures() -> None:
         "evaluations": 5, "certification_evaluations": 1, "poses_stored": 6,
         "wall_time_s": 12.0, "best_mu_s": 0.8,
         "rank_metric": "torque_margin_ratio", "best_rank": 0.6,
+        "best_robust_q": 0.42, "large_manifolds": None,  # the latter is read from the store
         "grasp_types": 2,  # {A, B, C} and {A, B, palm}
         "grasps": 4, "misses": 2, "time_to_first_grasp_s": 2.0, "time_to_near_best_s": 5.0,
     }
@@ -113,6 +116,9 @@ def test_every_explorer_is_counted_the_same_way(client, sessions, object_id,
     if strategy["name"] == "adaptive":  # the symmetry shortcut's copies are grasps, not work
         assert got["poses_stored"] > got["evaluations"]
         assert got["grasps"] > len(viable)
+        # The lattice explorer has a robust map: its best q_δ and its large manifolds.
+        assert 0.0 < got["best_robust_q"] <= got["best_mu_s"]
+        assert got["large_manifolds"] >= 1
     else:
         assert got["poses_stored"] == got["evaluations"]
         assert got["grasps"] == len(viable)
