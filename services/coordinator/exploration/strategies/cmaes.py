@@ -31,8 +31,6 @@ from __future__ import annotations
 
 import copy
 import math
-import threading
-from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -40,6 +38,7 @@ from typing import Any
 import cma
 import numpy as np
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Planned, Stage
+from graspscape.services.coordinator.exploration.strategies.replay_cache import ReplayCache, Told
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
 from graspscape.services.coordinator.store.models import PosePlanRow, PoseRow, TileRow
 from graspscape.shared.specs.exploration import CmaesStrategySpec, ExplorationSpec
@@ -161,43 +160,19 @@ class _Search:
             self.es = self._start()
 
 
-@dataclass
-class _Snapshot:
-    """A search after telling `told` generations: (pose keys, qualities) each."""
-
-    search: _Search
-    told: list[tuple[list[str], list[float]]]
-
-
-# Searches as the last replay left them, per exploration. Only a speed-up: a snapshot is used
-# when the qualities it was told are still what the store says, and the search is a function
-# of the spec and of those, so resuming equals replaying from the seed.
-_SNAPSHOTS: OrderedDict[str, _Snapshot] = OrderedDict()
-_SNAPSHOTS_KEPT = 16
-_LOCK = threading.Lock()
+# Searches as the last replay left them, per exploration (strategies/replay_cache.py).
+_SEARCHES: ReplayCache[_Search] = ReplayCache()
 
 
 def _resume(cache_key: str | None, spec: ExplorationSpec, g: int,
-            quality_of: Callable[[str], float]) -> tuple[_Search, list]:
-    with _LOCK:
-        snap = _SNAPSHOTS.get(cache_key) if cache_key is not None else None
-    if snap is not None and len(snap.told) <= g and all(
-            quality_of(key) == q
-            for keys, qs in snap.told for key, q in zip(keys, qs, strict=True)):
-        return copy.deepcopy(snap.search), list(snap.told)
+            quality_of: Callable[[str], float]) -> tuple[_Search, Told]:
+    kept = _SEARCHES.resume(cache_key, g, quality_of,
+                            take=lambda snap: copy.deepcopy(snap.search), pop=False)
+    if kept is not None:
+        return kept
     strategy = spec.strategy
     assert isinstance(strategy, CmaesStrategySpec)
     return _Search(spec, strategy), []
-
-
-def _keep(cache_key: str | None, snap: _Snapshot) -> None:
-    if cache_key is None:
-        return
-    with _LOCK:
-        _SNAPSHOTS[cache_key] = snap
-        _SNAPSHOTS.move_to_end(cache_key)
-        while len(_SNAPSHOTS) > _SNAPSHOTS_KEPT:
-            _SNAPSHOTS.popitem(last=False)
 
 
 def generation(spec: ExplorationSpec, g: int, quality_of: Callable[[str], float],
@@ -213,7 +188,7 @@ def generation(spec: ExplorationSpec, g: int, quality_of: Callable[[str], float]
         xs, poses = search.ask()
         if not poses or (before is not None and not all(skip(p.key()) for p in poses)):
             if before is not None:
-                _keep(cache_key, _Snapshot(before, told))
+                _SEARCHES.keep(cache_key, before, told)
             return len(told), poses
         keys = [p.key() for p in poses]
         qualities = [quality_of(key) for key in keys]

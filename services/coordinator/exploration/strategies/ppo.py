@@ -29,8 +29,6 @@ install it.
 from __future__ import annotations
 
 import contextlib
-import threading
-from collections import OrderedDict
 from collections.abc import Callable, Generator, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -47,6 +45,7 @@ from graspscape.services.coordinator.exploration.strategies.ppo_env import (
     require_rl,
     reward,
 )
+from graspscape.services.coordinator.exploration.strategies.replay_cache import ReplayCache, Told
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
 from graspscape.services.coordinator.store.models import PosePlanRow, PoseRow, TileRow
 from graspscape.shared.specs.exploration import ExplorationSpec, PpoStrategySpec
@@ -182,43 +181,19 @@ def _never(pose: Pose) -> tuple[bool, float, float]:
     raise AssertionError("the scheduler evaluates the ppo strategy's poses, not the env")
 
 
-@dataclass
-class _Snapshot:
-    """A search after training on `told` rollouts: (pose keys, rewards) each."""
-
-    search: _Search
-    told: list[tuple[list[str], list[float]]]
-
-
-# Searches as the last replay left them, per exploration (a speed-up only: see the module
-# docstring). A resumed search is taken out of the cache while it runs, so no two calls
-# share one.
-_SNAPSHOTS: OrderedDict[str, _Snapshot] = OrderedDict()
-_SNAPSHOTS_KEPT = 16
-_LOCK = threading.Lock()
+# Searches as the last replay left them, per exploration (strategies/replay_cache.py). A
+# resumed search is taken out of the cache while it runs, so no two calls share one.
+_SEARCHES: ReplayCache[_Search] = ReplayCache()
 
 
 def _resume(cache_key: str | None, spec: ExplorationSpec, g: int,
-            reward_of: Callable[[str], float]) -> tuple[_Search, list]:
-    with _LOCK:
-        snap = _SNAPSHOTS.pop(cache_key, None) if cache_key is not None else None
-    if snap is not None and len(snap.told) <= g and all(
-            reward_of(key) == r
-            for keys, rs in snap.told for key, r in zip(keys, rs, strict=True)):
-        return snap.search, list(snap.told)
+            reward_of: Callable[[str], float]) -> tuple[_Search, Told]:
+    kept = _SEARCHES.resume(cache_key, g, reward_of, take=lambda snap: snap.search, pop=True)
+    if kept is not None:
+        return kept
     strategy = spec.strategy
     assert isinstance(strategy, PpoStrategySpec)
     return _Search(spec, strategy), []
-
-
-def _keep(cache_key: str | None, snap: _Snapshot) -> None:
-    if cache_key is None:
-        return
-    with _LOCK:
-        _SNAPSHOTS[cache_key] = snap
-        _SNAPSHOTS.move_to_end(cache_key)
-        while len(_SNAPSHOTS) > _SNAPSHOTS_KEPT:
-            _SNAPSHOTS.popitem(last=False)
 
 
 def rollout(spec: ExplorationSpec, g: int, reward_of: Callable[[str], float],
@@ -235,7 +210,7 @@ def rollout(spec: ExplorationSpec, g: int, reward_of: Callable[[str], float],
         if not poses or (mark is not None and not all(skip(p.key()) for p in poses)):
             if mark is not None:
                 search.restore(mark)
-                _keep(cache_key, _Snapshot(search, told))
+                _SEARCHES.keep(cache_key, search, told)
             return len(told), poses
         keys = [p.key() for p in poses]
         rewards = [reward_of(key) for key in keys]

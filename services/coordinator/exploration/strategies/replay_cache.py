@@ -1,0 +1,61 @@
+"""Searches kept between scheduler rounds, for the explorers that replay from their seed.
+
+CMA-ES and PPO are functions of the spec and of the results told so far, so each round could
+replay the whole search from the seed. Keeping the search as the last round left it is only a
+speed-up: a kept search is used when what it was told is still what the store says, so
+resuming equals replaying.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+S = TypeVar("S")
+
+Told = list[tuple[list[str], list[float]]]  # per round: (pose keys, their values)
+
+
+@dataclass
+class Snapshot(Generic[S]):
+    """A search after being told `told` rounds."""
+
+    search: S
+    told: Told
+
+
+class ReplayCache(Generic[S]):
+    """The last `kept` searches by cache key (least recently kept dropped first)."""
+
+    def __init__(self, kept: int = 16) -> None:
+        self._snapshots: OrderedDict[str, Snapshot[S]] = OrderedDict()
+        self._kept = kept
+        self._lock = threading.Lock()
+
+    def resume(self, cache_key: str | None, rounds: int, value_of: Callable[[str], float],
+               *, take: Callable[[Snapshot[S]], S], pop: bool) -> tuple[S, Told] | None:
+        """The kept search and what it was told, where it was told at most `rounds` rounds
+        and every value still equals `value_of(key)`; else None. `pop` takes it out of the
+        cache while it runs (a search too costly to copy); `take` makes the caller's copy."""
+        if cache_key is None:
+            return None
+        with self._lock:
+            snap = (self._snapshots.pop(cache_key, None) if pop
+                    else self._snapshots.get(cache_key))
+        if snap is None or len(snap.told) > rounds or not all(
+                value_of(key) == v
+                for keys, vs in snap.told for key, v in zip(keys, vs, strict=True)):
+            return None
+        return take(snap), list(snap.told)
+
+    def keep(self, cache_key: str | None, search: S, told: Told) -> None:
+        if cache_key is None:
+            return
+        with self._lock:
+            self._snapshots[cache_key] = Snapshot(search, told)
+            self._snapshots.move_to_end(cache_key)
+            while len(self._snapshots) > self._kept:
+                self._snapshots.popitem(last=False)
