@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from graspscape.services.coordinator.datasets.formats import FORMATS
+from graspscape.services.coordinator.manifolds import best as ranking
 from graspscape.services.coordinator.manifolds import export
 from graspscape.services.coordinator.manifolds import service as manifolds
 from graspscape.services.coordinator.manifolds.summary import table_rows_of
@@ -138,7 +139,7 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
     grasps = []
     for m in listed[:MAX_GRASP_PICTURES]:
         # Ranked as GET /best ranks by default.
-        best = manifolds.best_poses(session, eid, label=m.label, limit=1)
+        best = ranking.best_poses(session, eid, label=m.label, limit=1)
         if not best:
             continue
         pose = best[0]

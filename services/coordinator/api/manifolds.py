@@ -17,6 +17,7 @@ from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import error
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.schemas import PoseOut
+from graspscape.services.coordinator.manifolds import best as ranking
 from graspscape.services.coordinator.manifolds import export
 from graspscape.services.coordinator.manifolds import service as manifolds
 from graspscape.services.coordinator.manifolds.robust import coarser_for_error, error_in_steps
@@ -64,7 +65,7 @@ class ManifoldTable(ManifoldList):
 
 
 class CertificationEvidence(BaseModel):
-    """What backs a pose's robust score (manifolds.service.Evidence)."""
+    """What backs a pose's robust score (manifolds.best.Evidence)."""
 
     neighbours: int = Field(description="members of N_δ(p) on the lattice")
     neighbours_known: int = Field(description="of them stored (evaluated or shortcut-inferred)")
@@ -155,13 +156,13 @@ def best(
                                                        allow_inf_nan=False)] = None,
     max_effort_nm: Annotated[float | None, Query(ge=0.0, le=1e6, allow_inf_nan=False)] = None,
     limit: Annotated[int, Query(ge=1, le=100)] = 1,
-    rank: Annotated[manifolds.Rank, Query(
+    rank: Annotated[ranking.Rank, Query(
         description="robust (default): by the robust map over the pose-error neighbourhood "
         "N_δ — robust poses first, then uncertain, fragile, futile, each by robust quality "
         "q_δ; point: by the pose's own torque_margin_ratio; or by μs, a static metric (mu_g, "
         "mu_f, mu_m) or a robustness margin or test; highest first, except torque_margin_nm "
         "and friction_margin (lowest first); poses without the value come last, ties by μs"
-    )] = manifolds.BEST_DEFAULT_RANK,
+    )] = ranking.BEST_DEFAULT_RANK,
     pose_error_mm: Annotated[float | None, Query(
         ge=0.0, le=1e4, allow_inf_nan=False,
         description="the robot's position error, mm: beyond one finest r step, δ is two "
@@ -183,9 +184,9 @@ def best(
     elif cone_half_angle_deg is not None:
         raise InvalidInput("cone_half_angle_deg needs cone_x, cone_y, cone_z", loc=("query",))
     manifolds.ensure_manifolds(session, exploration_id)
-    lattice = manifolds.lattice_of_exploration(session, exploration_id)
+    lattice = ranking.lattice_of_exploration(session, exploration_id)
     coarser = coarser_for_error(lattice, pose_error_mm, pose_error_deg)
-    rows = manifolds.best_poses(
+    rows = ranking.best_poses(
         session, exploration_id,
         label=_label_number(manifold) if manifold is not None else None,
         cone_axis=axis,
@@ -193,7 +194,7 @@ def best(
         else None,
         max_effort_nm=max_effort_nm, limit=limit, rank=rank, coarser=coarser,
     )
-    evidence = manifolds.robust_evidence(session, exploration_id, rows, coarser=coarser)
+    evidence = ranking.robust_evidence(session, exploration_id, rows, coarser=coarser)
     poses = []
     for row, ev in zip(rows, evidence, strict=True):
         sc = ev.score
@@ -213,7 +214,7 @@ def best(
     steps = 1 << coarser
     return BestOut(
         exploration_id=exploration_id, manifold=manifold,
-        rank=(manifolds.DEFAULT_RANK if rank == manifolds.Rank.POINT else rank).value,
+        rank=(ranking.DEFAULT_RANK if rank == ranking.Rank.POINT else rank).value,
         delta_steps=steps,
         delta_deg=math.degrees(lattice.dtheta(lattice.depth)) * steps,
         delta_mm=lattice.dr(lattice.depth) * 1000.0 * steps,

@@ -34,7 +34,7 @@ from typing import Any
 from graspscape.services.coordinator.exploration.certify_store import certification_plans
 from graspscape.services.coordinator.exploration.service import get_exploration
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.service import DEFAULT_RANK, LOWER_IS_BETTER
+from graspscape.services.coordinator.manifolds.best import DEFAULT_RANK, LOWER_IS_BETTER
 from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
 from pydantic import BaseModel, Field
 from sqlalchemy import func, select

@@ -21,15 +21,15 @@ from graspscape.services.coordinator.exploration.certify_store import (
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.best import (
+    Rank,
+    best_poses,
+    robust_evidence,
+)
 from graspscape.services.coordinator.manifolds.robust import (
     RobustLabel,
     neighbourhood,
     robust_scores,
-)
-from graspscape.services.coordinator.manifolds.service import (
-    Rank,
-    best_poses,
-    robust_evidence,
 )
 from graspscape.services.coordinator.objects.service import create_named
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow

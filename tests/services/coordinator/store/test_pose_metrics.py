@@ -11,7 +11,7 @@ import pyarrow.parquet as pq
 import pytest
 from fastapi.testclient import TestClient
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
-from graspscape.services.coordinator.manifolds import service as manifolds
+from graspscape.services.coordinator.manifolds import best
 from graspscape.services.coordinator.manifolds.export import COLUMNS
 from graspscape.services.coordinator.store.models import POSE_METRIC_COLUMNS, PoseRow
 from graspscape.services.coordinator.store.queue import lease_tiles
@@ -147,7 +147,7 @@ def test_best_ranks_by_the_chosen_metric_with_missing_values_last(
     # Highest first; the tie at 0.8 by μs; no value (pose 0 despite its μs of 0.9) last.
     by_torque_margin = [key[3], key[2], key[1], key[0], key[4]]
     assert order(rank="torque_margin_ratio") == by_torque_margin
-    assert manifolds.DEFAULT_RANK == "torque_margin_ratio"
+    assert best.DEFAULT_RANK == "torque_margin_ratio"
     assert order(rank="point") == by_torque_margin
     ratios = [p["torque_margin_ratio"] for p in _best(client, eid, rank="torque_margin_ratio")]
     assert ratios == [0.8, 0.8, 0.2, None, None]
@@ -156,7 +156,7 @@ def test_best_ranks_by_the_chosen_metric_with_missing_values_last(
     assert order(rank="friction_margin", limit=2) == [key[4], key[2]]
     assert order(rank="mu_f") == [key[2], key[1], key[3], key[0], key[4]]
     assert order(rank="tug_force_n") == [key[1], key[0], key[3], key[2], key[4]]
-    for rank in manifolds.Rank:
+    for rank in best.Rank:
         assert sorted(order(rank=rank.value)) == sorted(by_mu_s)
 
 
