@@ -22,7 +22,6 @@ import numpy as np
 import pybullet as p
 from graspscape.shared.specs.gripper import GripperSpec, load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
-from graspscape.shared.specs.placement import Placement, place_gripper
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
     GraspConfiguration,
@@ -34,7 +33,6 @@ from graspscape.shared.specs.results import (
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.bullet import (
-    get_closest_points,
     remove_state,
     restore_state,
     save_state,
@@ -57,7 +55,7 @@ from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, r
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.signature import build_signature
-from graspscape.workers.sim.start_gap import first_clear_gap
+from graspscape.workers.sim.start_pose import StartPose, place_hand, start_pose
 from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
 
 FIXTURE_MAX_FORCE_N = 5000.0
@@ -126,74 +124,13 @@ class Evaluator:
         p.changeConstraint(scene.fixture_constraint, jointChildPivot=scene.offset.tolist(),
                            maxForce=FIXTURE_MAX_FORCE_N, physicsClientId=cid)
 
-    def _penetrating(self) -> bool:
-        tolerance = self.settings.placement.penetration_tolerance_m
-        points = get_closest_points(self.client, self.scene.hand.body, self.scene.object_body,
-                                    0.0)
-        return any(pt.contact_distance < -tolerance for pt in points)
-
     def _place(self, position: np.ndarray, rotation: np.ndarray) -> None:
-        hand = self.scene.hand
-        com, orn = hand.com_pose_for(position, rotation)
-        p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=self.client)
-        p.resetBaseVelocity(hand.body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
-        self.scene.drive_to(position, rotation)
-        # Contact queries report the last collision pass; refresh it for the new placement.
-        p.performCollisionDetection(physicsClientId=self.client)
+        place_hand(self.client, self.scene, position, rotation)
 
-    def _start_pose(self, pose: Pose) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+    def _start_pose(self, pose: Pose) -> StartPose | None:
         """World start pose of the gripper frame, the target x_c and the effective r."""
-        placement = place_gripper(self.prepared.mesh, pose)
-        settings = self.settings.placement
-        position = self.scene.offset + placement.position
-        gap = placement.gap
-        if settings.start_gap == "clearance":
-            return self._clearance_start(placement, position, pose.r)
-        backed = 0.0
-        while True:
-            self._place(position, placement.rotation)
-            if not self._penetrating():
-                break
-            if settings.on_interpenetration == "infeasible" or backed >= settings.max_backoff_m:
-                return None
-            position = position + placement.surface_normal * settings.backoff_step_m
-            backed += settings.backoff_step_m
-            gap += settings.backoff_step_m
-        return position, placement.rotation, self.scene.offset + placement.nearest_point, gap
-
-    def _clearance_start(self, placement: Placement, position: np.ndarray, clearance: float,
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
-        """`_start_pose` where r is the open hand's clearance along its approach axis: the
-        palm gap d₀ at which the hand along the surface normal first clears the object (from
-        the surface out, in `backoff_step_m` steps, then bisected to `clearance_tolerance_m`;
-        clear: no penetration deeper than `penetration_tolerance_m`), plus r. The hand can
-        then travel r toward x_c before it touches, whatever its fingers meet first."""
-        settings = self.settings.placement
-        normal = placement.surface_normal
-
-        def at(gap: float) -> np.ndarray:
-            return position + normal * (gap - placement.gap)
-
-        def clear(gap: float) -> bool:
-            # "Touching" as the back-off has it (penetration_tolerance_m), so both modes
-            # call the same starts clear.
-            self._place(at(gap), placement.rotation)
-            return not self._penetrating()
-
-        step, tolerance = settings.backoff_step_m, settings.clearance_tolerance_m
-        # As far out as the back-off may go (the nominal palm gap + max_backoff_m: where the
-        # ray passes the mug's opening that gap is 2 cm at r = 0).
-        reach = placement.gap + settings.max_backoff_m
-        touching = first_clear_gap(clear, 0.0, step, reach, tolerance)
-        # Backing off further almost always stays clear; where it does not (a finger moving
-        # back into a handle), the first clear gap beyond is taken the same way.
-        gap = None if touching is None else first_clear_gap(
-            clear, touching + clearance, step, settings.max_backoff_m, tolerance)
-        if gap is None or (settings.on_interpenetration == "infeasible"
-                           and gap > placement.gap + tolerance):
-            return None
-        self._place(at(gap), placement.rotation)  # the search may have ended elsewhere
-        return (at(gap), placement.rotation, self.scene.offset + placement.nearest_point, gap)
+        return start_pose(self.client, self.scene, self.prepared.mesh, pose,
+                          self.settings.placement)
 
     def evaluate(self, pose: Pose, *, picture: Path | None = None,
                  donors: DonorPool | None = None) -> PoseResult:

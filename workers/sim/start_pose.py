@@ -1,0 +1,94 @@
+"""Where the open hand starts for a pose: placed at the lattice pose, then moved out along the
+surface normal until it no longer interpenetrates the object (the pybullet side of
+`placement.start_gap`; the search itself is `start_gap.first_clear_gap`).
+
+Modes (`PlacementSettings.start_gap`): "palm" backs the hand off in `backoff_step_m` steps
+from the nominal palm gap; "clearance" makes r the open hand's free travel along its approach
+axis (docs/simulation.md "Start gap").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as p
+from graspscape.shared.specs.placement import Placement, place_gripper
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.sim import PlacementSettings
+from graspscape.workers.sim.bullet import get_closest_points
+from graspscape.workers.sim.scene import Scene
+from graspscape.workers.sim.start_gap import first_clear_gap
+
+# World start position of the gripper frame, its rotation, the target x_c and the palm gap.
+StartPose = tuple[np.ndarray, np.ndarray, np.ndarray, float]
+
+
+def place_hand(client: int, scene: Scene, position: np.ndarray, rotation: np.ndarray) -> None:
+    """The open hand at rest with its gripper frame at (position, rotation)."""
+    hand = scene.hand
+    com, orn = hand.com_pose_for(position, rotation)
+    p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=client)
+    p.resetBaseVelocity(hand.body, [0, 0, 0], [0, 0, 0], physicsClientId=client)
+    scene.drive_to(position, rotation)
+    # Contact queries report the last collision pass; refresh it for the new placement.
+    p.performCollisionDetection(physicsClientId=client)
+
+
+def penetrating(client: int, scene: Scene, tolerance: float) -> bool:
+    points = get_closest_points(client, scene.hand.body, scene.object_body, 0.0)
+    return any(pt.contact_distance < -tolerance for pt in points)
+
+
+def start_pose(client: int, scene: Scene, mesh: object, pose: Pose,
+               settings: PlacementSettings) -> StartPose | None:
+    """World start pose of the gripper frame, the target x_c and the effective r; None where
+    the hand cannot start clear of the object (`on_interpenetration`, `max_backoff_m`)."""
+    placement = place_gripper(mesh, pose)
+    position = scene.offset + placement.position
+    gap = placement.gap
+    if settings.start_gap == "clearance":
+        return _clearance_start(client, scene, placement, position, pose.r, settings)
+    backed = 0.0
+    while True:
+        place_hand(client, scene, position, placement.rotation)
+        if not penetrating(client, scene, settings.penetration_tolerance_m):
+            break
+        if settings.on_interpenetration == "infeasible" or backed >= settings.max_backoff_m:
+            return None
+        position = position + placement.surface_normal * settings.backoff_step_m
+        backed += settings.backoff_step_m
+        gap += settings.backoff_step_m
+    return position, placement.rotation, scene.offset + placement.nearest_point, gap
+
+
+def _clearance_start(client: int, scene: Scene, placement: Placement, position: np.ndarray,
+                     clearance: float, settings: PlacementSettings) -> StartPose | None:
+    """`start_pose` where r is the open hand's clearance along its approach axis: the palm
+    gap d₀ at which the hand along the surface normal first clears the object (from the
+    surface out, in `backoff_step_m` steps, then bisected to `clearance_tolerance_m`; clear:
+    no penetration deeper than `penetration_tolerance_m`), plus r. The hand can then travel r
+    toward x_c before it touches, whatever its fingers meet first."""
+    normal = placement.surface_normal
+
+    def at(gap: float) -> np.ndarray:
+        return position + normal * (gap - placement.gap)
+
+    def clear(gap: float) -> bool:
+        # "Touching" as the back-off has it (penetration_tolerance_m), so both modes call the
+        # same starts clear.
+        place_hand(client, scene, at(gap), placement.rotation)
+        return not penetrating(client, scene, settings.penetration_tolerance_m)
+
+    step, tolerance = settings.backoff_step_m, settings.clearance_tolerance_m
+    # As far out as the back-off may go (the nominal palm gap + max_backoff_m: where the ray
+    # passes the mug's opening that gap is 2 cm at r = 0).
+    reach = placement.gap + settings.max_backoff_m
+    touching = first_clear_gap(clear, 0.0, step, reach, tolerance)
+    # Backing off further almost always stays clear; where it does not (a finger moving back
+    # into a handle), the first clear gap beyond is taken the same way.
+    gap = None if touching is None else first_clear_gap(
+        clear, touching + clearance, step, settings.max_backoff_m, tolerance)
+    if gap is None or (settings.on_interpenetration == "infeasible"
+                       and gap > placement.gap + tolerance):
+        return None
+    place_hand(client, scene, at(gap), placement.rotation)  # the search may have ended elsewhere
+    return (at(gap), placement.rotation, scene.offset + placement.nearest_point, gap)
