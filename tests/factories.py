@@ -7,7 +7,9 @@ import math
 import random
 
 import trimesh
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.store.models import ObjectRow, PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
 from graspscape.shared.specs.pose import Pose
@@ -133,3 +135,21 @@ def explore_with_oracle(sessions: sessionmaker[Session], spec: ExplorationSpec, 
         stored = sorted(s.scalars(select(PoseRow.pose_key)
                                   .where(PoseRow.exploration_id == eid)))
     return eid, evaluated, stored
+
+
+# Hand-made label fields on a real lattice (the robust map's and its scoring's tests).
+POWER = frozenset({"A", "B", "C", "palm"})
+PINCH = frozenset({"A", "B"})
+
+
+def lattice_pose(lattice: Lattice, p: Point, digits: frozenset[str] | None,
+                 mu: float = 0.5) -> StoredPose:
+    """The stored pose at lattice point p: held with `digits` in contact and μs `mu`, or
+    dropped where `digits` is None."""
+    x = lattice.pose(p)
+    return StoredPose(
+        key=f"{p.ring}.{p.azimuth}.{p.r_index}.{p.attitude}", theta=x.theta, phi=x.phi,
+        r=x.r, roll=x.roll, pitch=x.pitch, yaw=x.yaw, viable=digits is not None,
+        outcome="held" if digits is not None else "dropped", mu_s=mu if digits else 0.0,
+        digits=digits or frozenset(),
+    )

@@ -20,8 +20,8 @@ from graspscape.services.coordinator.manifolds.robust import (
 )
 from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
 
-POWER = frozenset({"A", "B", "C", "palm"})
-PINCH = frozenset({"A", "B"})
+from tests.factories import PINCH, POWER, lattice_pose
+
 # A 30° grid refined once: the finest step is 15°, 5 r levels, 2 rolls.
 LATTICE = Lattice(
     PoseGridSpec(dtheta=math.radians(30), r_min=0.0, r_max=0.02, dr=0.01,
@@ -41,13 +41,7 @@ hood = Neighbourhoods(LATTICE)  # N_δ(p) of many points, as robust_scores compu
 
 
 def pose(p: Point, digits: frozenset[str] | None, mu: float = 0.5) -> StoredPose:
-    x = LATTICE.pose(p)
-    return StoredPose(
-        key=f"{p.ring}.{p.azimuth}.{p.r_index}.{p.attitude}", theta=x.theta, phi=x.phi,
-        r=x.r, roll=x.roll, pitch=x.pitch, yaw=x.yaw, viable=digits is not None,
-        outcome="held" if digits is not None else "dropped", mu_s=mu if digits else 0.0,
-        digits=digits or frozenset(),
-    )
+    return lattice_pose(LATTICE, p, digits, mu)
 
 
 DISC = {p for p in POINTS if LATTICE.direction(p)[2] > math.cos(math.radians(50))}

@@ -19,8 +19,8 @@ from graspscape.services.coordinator.manifolds.scoring import (
 )
 from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
 
-POWER = frozenset({"A", "B", "C", "palm"})
-PINCH = frozenset({"A", "B"})
+from tests.factories import PINCH, POWER, lattice_pose
+
 # A 60° grid refined once (small, so the tests stay fast): the finest step is 30°, 5 r
 # levels, 2 rolls.
 LATTICE = Lattice(
@@ -35,13 +35,7 @@ DISC = {p for p in POINTS if LATTICE.direction(p)[2] > math.cos(math.radians(50)
 
 
 def pose(p: Point, digits: frozenset[str] | None, mu: float = 0.5) -> StoredPose:
-    x = LATTICE.pose(p)
-    return StoredPose(
-        key=f"{p.ring}.{p.azimuth}.{p.r_index}.{p.attitude}", theta=x.theta, phi=x.phi,
-        r=x.r, roll=x.roll, pitch=x.pitch, yaw=x.yaw, viable=digits is not None,
-        outcome="held" if digits is not None else "dropped", mu_s=mu if digits else 0.0,
-        digits=digits or frozenset(),
-    )
+    return lattice_pose(LATTICE, p, digits, mu)
 
 
 def disc_map(held: set[Point]) -> MapLabels:
