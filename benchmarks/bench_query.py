@@ -87,25 +87,15 @@ def build(url: str, dtheta: float) -> tuple[int, float]:
     """An exploration of the grid made through the real ingest; (poses, ingest seconds)."""
     from graspscape.services.coordinator import db
     from graspscape.services.coordinator.exploration.scheduler import ingest_results
-    from graspscape.services.coordinator.exploration.service import create_exploration
-    from graspscape.services.coordinator.store.models import ObjectRow
     from graspscape.services.coordinator.store.queue import lease_tiles
-    from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
 
-    from benchmarks.bench_reads import store_manifolds
+    from benchmarks.bench_reads import create_grid_exploration, store_manifolds
 
     db.upgrade(url, REVISION)
     engine = db.make_engine(url)
     sessions = db.make_sessionmaker(engine)
-    grid = PoseGridSpec(dtheta=dtheta, r_min=0.0, r_max=0.05, dr=0.01, attitudes={"rolls": 4})
     with sessions() as s:
-        obj = ObjectRow(kind="named", name="sphere", properties={})
-        s.add(obj)
-        s.commit()
-        spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid,
-                               strategy={"name": "grid"}, refinement={"levels": 0})
-        eid = create_exploration(s, spec=spec, tile_target_poses=TILE_POSES,
-                                 max_poses=10**7).id
+        eid = create_grid_exploration(s, dtheta)
     assert eid == 1, "a fresh database: the exploration measured is id 1"
     poses, busy = 0, 0.0
     with sessions() as s:

@@ -45,28 +45,35 @@ def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def create_grid_exploration(session, dtheta: float) -> int:  # type: ignore[no-untyped-def]
+    """A dense-grid exploration of the sphere (r 0–5 cm by 1 cm, 4 rolls) in `session`'s
+    database; its id. The map the read and query benchmarks fill through the real ingest."""
+    from graspscape.services.coordinator.exploration.service import create_exploration
+    from graspscape.services.coordinator.store.models import ObjectRow
+    from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
+
+    grid = PoseGridSpec(dtheta=dtheta, r_min=0.0, r_max=0.05, dr=0.01, attitudes={"rolls": 4})
+    obj = ObjectRow(kind="named", name="sphere", properties={})
+    session.add(obj)
+    session.commit()
+    spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid,
+                           strategy={"name": "grid"}, refinement={"levels": 0})
+    return create_exploration(session, spec=spec, tile_target_poses=TILE_POSES,
+                              max_poses=10**7).id
+
+
 def build(url: str, dtheta: float) -> tuple[int, int, float]:
     """An exploration of the grid made through the real ingest; (id, poses, seconds)."""
     from graspscape.services.coordinator import db
     from graspscape.services.coordinator.exploration.scheduler import ingest_results
-    from graspscape.services.coordinator.exploration.service import create_exploration
-    from graspscape.services.coordinator.store.models import ObjectRow
     from graspscape.services.coordinator.store.queue import lease_tiles
-    from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
 
     from tests.factories import oracle_result
 
     db.upgrade(url)
     sessions = db.make_sessionmaker(db.make_engine(url))
-    grid = PoseGridSpec(dtheta=dtheta, r_min=0.0, r_max=0.05, dr=0.01, attitudes={"rolls": 4})
     with sessions() as s:
-        obj = ObjectRow(kind="named", name="sphere", properties={})
-        s.add(obj)
-        s.commit()
-        spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid,
-                               strategy={"name": "grid"}, refinement={"levels": 0})
-        eid = create_exploration(s, spec=spec, tile_target_poses=TILE_POSES,
-                                 max_poses=10**7).id
+        eid = create_grid_exploration(s, dtheta)
     poses = 0
     start = time.perf_counter()
     with sessions() as s:
