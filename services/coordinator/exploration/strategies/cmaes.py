@@ -38,12 +38,16 @@ from typing import Any
 import cma
 import numpy as np
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Planned, Stage
-from graspscape.services.coordinator.exploration.strategies.replay_cache import ReplayCache, Told
+from graspscape.services.coordinator.exploration.strategies.replay_cache import (
+    ReplayCache,
+    Told,
+    next_replayed_round,
+)
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
-from graspscape.services.coordinator.store.models import PosePlanRow, PoseRow, TileRow
+from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.shared.specs.exploration import CmaesStrategySpec, ExplorationSpec
 from graspscape.shared.specs.pose import Pose
-from sqlalchemy import func, select
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 # Weight of the (|v| − 1)² term: small against quality differences (0.1–0.5), enough to keep
@@ -216,19 +220,8 @@ class CmaesStrategy:
         return []  # a generation is told only once all of it is stored: in next_round
 
     def next_round(self, batch: Batch) -> list[Planned]:
-        session, eid = batch.session, batch.exploration_id
-        done = 1 + (session.scalar(
-            select(func.max(TileRow.round)).where(TileRow.exploration_id == eid)) or 0)
-        stored = self._qualities(session, eid)
-        planned = set(session.scalars(
-            select(PosePlanRow.pose_key).where(PosePlanRow.exploration_id == eid)))
-        # A generation whose poses are all stored or planned already (a repeat, down to the
-        # key's 1e-6) is told from the store and skipped: queueing nothing would end the run.
-        k, poses = generation(self.spec, done, lambda key: stored.get(key, 0.0),
-                              skip=lambda key: key in stored or key in planned,
-                              cache_key=f"{eid}:{self.spec.model_dump_json()}")
-        return [Planned(pose, plan_level=0, tile_level=0, reason="cmaes", round=k,
-                        counted=False) for pose in poses]
+        values = self._qualities(batch.session, batch.exploration_id)
+        return next_replayed_round(batch, self.spec, generation, values, "cmaes")
 
     def progress(self, batch: Batch, stage: Stage) -> None:
         return None  # off-lattice poses: no manifolds to refresh

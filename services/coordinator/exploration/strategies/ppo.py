@@ -45,12 +45,16 @@ from graspscape.services.coordinator.exploration.strategies.ppo_env import (
     require_rl,
     reward,
 )
-from graspscape.services.coordinator.exploration.strategies.replay_cache import ReplayCache, Told
+from graspscape.services.coordinator.exploration.strategies.replay_cache import (
+    ReplayCache,
+    Told,
+    next_replayed_round,
+)
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
-from graspscape.services.coordinator.store.models import PosePlanRow, PoseRow, TileRow
+from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec, PpoStrategySpec
 from graspscape.shared.specs.pose import Pose
-from sqlalchemy import func, select
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 # Hidden layer of the policy and value networks: the observation is constant, so the
@@ -248,17 +252,8 @@ class PpoStrategy:
         return []  # a rollout is trained on only once all of it is stored: in next_round
 
     def next_round(self, batch: Batch) -> list[Planned]:
-        session, eid = batch.session, batch.exploration_id
-        done = 1 + (session.scalar(
-            select(func.max(TileRow.round)).where(TileRow.exploration_id == eid)) or 0)
-        stored = self._rewards(session, eid)
-        planned = set(session.scalars(
-            select(PosePlanRow.pose_key).where(PosePlanRow.exploration_id == eid)))
-        k, poses = rollout(self.spec, done, lambda key: stored.get(key, 0.0),
-                           skip=lambda key: key in stored or key in planned,
-                           cache_key=f"{eid}:{self.spec.model_dump_json()}")
-        return [Planned(pose, plan_level=0, tile_level=0, reason="ppo", round=k,
-                        counted=False) for pose in poses]
+        values = self._rewards(batch.session, batch.exploration_id)
+        return next_replayed_round(batch, self.spec, rollout, values, "ppo")
 
     def progress(self, batch: Batch, stage: Stage) -> None:
         return None  # off-lattice poses: no manifolds to refresh

@@ -10,13 +10,27 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Generic, Protocol, TypeVar
+
+from graspscape.services.coordinator.exploration.strategies.base import Batch, Planned
+from graspscape.services.coordinator.store.models import PosePlanRow, TileRow
+from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.pose import Pose
+from sqlalchemy import func, select
 
 S = TypeVar("S")
 
 Told = list[tuple[list[str], list[float]]]  # per round: (pose keys, their values)
+
+
+class Search(Protocol):
+    """`cmaes.generation` / `ppo.rollout`: (the round's index, its poses; [] when spent)."""
+
+    def __call__(self, spec: ExplorationSpec, g: int, value_of: Callable[[str], float], *,
+                 skip: Callable[[str], bool], cache_key: str | None) -> tuple[int, list[Pose]]:
+        ...
 
 
 @dataclass
@@ -59,3 +73,22 @@ class ReplayCache(Generic[S]):
             self._snapshots.move_to_end(cache_key)
             while len(self._snapshots) > self._kept:
                 self._snapshots.popitem(last=False)
+
+
+def next_replayed_round(batch: Batch, spec: ExplorationSpec, search: Search,
+                        values: Mapping[str, float], reason: str) -> list[Planned]:
+    """The next round of a replayed search (CMA-ES's generation, PPO's rollout): replayed
+    from the seed, told `values` (pose key → what the store says), resumed from the kept
+    search where it still holds. A round whose poses are all stored or planned already (a
+    repeat, down to the key's 1e-6) is told from the store and skipped: queueing nothing
+    would end the run."""
+    session, eid = batch.session, batch.exploration_id
+    done = 1 + (session.scalar(
+        select(func.max(TileRow.round)).where(TileRow.exploration_id == eid)) or 0)
+    planned = set(session.scalars(
+        select(PosePlanRow.pose_key).where(PosePlanRow.exploration_id == eid)))
+    k, poses = search(spec, done, lambda key: values.get(key, 0.0),
+                      skip=lambda key: key in values or key in planned,
+                      cache_key=f"{eid}:{spec.model_dump_json()}")
+    return [Planned(pose, plan_level=0, tile_level=0, reason=reason, round=k, counted=False)
+            for pose in poses]
