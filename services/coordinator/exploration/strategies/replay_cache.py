@@ -3,7 +3,7 @@
 CMA-ES and PPO are functions of the spec and of the results told so far, so each round could
 replay the whole search from the seed. Keeping the search as the last round left it is only a
 speed-up: a kept search is used when what it was told is still what the store says, so
-resuming equals replaying.
+resuming equals replaying. `next_replayed_round` is the scheduler round both explorers share.
 """
 
 from __future__ import annotations
