@@ -153,7 +153,13 @@ def soak(work: Path, *, tiles: int, procs: int = 3, kill_every_tiles: int | None
             loop_s.append(time.monotonic() - loop_at)
             time.sleep(sample_every_s)
         elapsed = time.monotonic() - started
-        time.sleep(2)  # the last kill's replacement connects
+        # The last kill's replacement: the supervisor polls every 0.5 s, and on a loaded
+        # 2-core machine its log line and the new connection can take seconds to appear.
+        deadline = time.monotonic() + 30
+        while (worker.output().count("starting it again") < len(kills)
+               and time.monotonic() < deadline):
+            time.sleep(0.2)
+        time.sleep(2)
         fd_kinds_last = fd_kinds(coordinator.pid)
         live = len([pid for pid in children_of(worker.pid) if "resource_tracker" not in
                     Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")])
