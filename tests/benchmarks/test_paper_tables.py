@@ -16,23 +16,33 @@ pytest.importorskip("stable_baselines3", reason="Table 3's PPO needs the optiona
 def test_the_harness_fills_every_table_on_the_sphere() -> None:
     out = run(["sphere"], SIZES["tiny"], processes=2)
     figures, rows = out["figures"], out["rows"]
-    runs = rows["table3"]["sphere"]["runs"]
-    assert set(runs) == {"adaptive_1", "adaptive_2", "ppo_seed0", "ppo_seed1", "ppo_seed2",
-                         "cmaes", "random"}
-    for label, r in runs.items():
-        # The sphere is held from most directions: every explorer finds a grasp.
-        assert r["grasps"] > 0 and 0.0 < r["quality_mu_s"] <= 1.0, label
-        assert r["grasps"] + r["misses"] == r["evaluations"], label
-        assert 0.0 < r["time_to_first_grasp_s"] <= r["time_s"], label
+    t3 = rows["table3"]["sphere"]
+    runs = t3["runs"]
+    assert set(runs) == {"adaptive_1", "adaptive_2"}
     # Adaptive at 2 rolls evaluates every pose of 1 roll and as many again.
     assert runs["adaptive_2"]["evaluations"] == 2 * runs["adaptive_1"]["evaluations"]
-    for label in ("cmaes", "random", "ppo_seed1"):
-        assert runs[label]["evaluations"] == SIZES["tiny"].budget
-    ppo = rows["table3"]["sphere"]["ppo"]
-    assert ppo["seeds"] == 3
-    assert ppo["quality_mu_s_min"] <= ppo["quality_mu_s"] <= ppo["quality_mu_s_max"]
-    assert figures["t3.fraction_of_ppo.adaptive_1.quality"] == pytest.approx(
-        runs["adaptive_1"]["quality_mu_s"] / ppo["quality_mu_s"], abs=1e-4)
+    assert set(t3["matched"]) == {"1", "2"}
+    for k, matched in t3["matched"].items():
+        # Each baseline got exactly the evaluations adaptive spent at k rolls.
+        assert matched["budget"] == runs[f"adaptive_{k}"]["evaluations"]
+        assert set(matched["runs"]) == {"ppo_seed0", "ppo_seed1", "ppo_seed2", "cmaes",
+                                        "random"}
+        for label, r in [*runs.items(), *matched["runs"].items()]:
+            # The sphere is held from most directions: every explorer finds a grasp.
+            assert r["grasps"] > 0 and 0.0 < r["quality_mu_s"] <= 1.0, label
+            assert r["grasps"] + r["misses"] == r["evaluations"], label
+            assert 0.0 < r["time_to_first_grasp_s"] <= r["time_s"], label
+        for r in matched["runs"].values():
+            assert r["evaluations"] == matched["budget"]
+        ppo = matched["ppo"]
+        assert ppo["seeds"] == 3
+        assert ppo["quality_mu_s_min"] <= ppo["quality_mu_s"] <= ppo["quality_mu_s_max"]
+    assert figures["t3.matched.adaptive_1.quality"] == pytest.approx(
+        runs["adaptive_1"]["quality_mu_s"] / t3["matched"]["1"]["ppo"]["quality_mu_s"],
+        abs=1e-4)
+    assert figures["t3.paper_layout.adaptive_1.quality"] == pytest.approx(
+        runs["adaptive_1"]["quality_mu_s"] / t3["matched"]["2"]["ppo"]["quality_mu_s"],
+        abs=1e-4)
     t1 = rows["table1"]["sphere"]
     for metric in ("mu_s", "mu_g", "mu_f", "mu_m", "torque_margin_ratio"):
         effort = t1[metric]["min_closing_effort_nm"]
