@@ -11,11 +11,12 @@ from collections.abc import Iterator
 from typing import IO, Any
 
 from fastapi import APIRouter
-from fastapi.responses import Response, StreamingResponse
+from fastapi.responses import Response
 from graspscape.services.coordinator.api.deps import SessionDep
 from graspscape.services.coordinator.api.explorations import Id
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import error
+from graspscape.services.coordinator.api.streams import ClosingStream
 from graspscape.services.coordinator.datasets.formats import FORMATS, DatasetFormat
 
 router = APIRouter(tags=["datasets"], route_class=FiniteJSONRoute)
@@ -42,8 +43,10 @@ def _route(name: str, fmt: DatasetFormat) -> None:
             raise
         file.seek(0)
         disposition = f'attachment; filename="exploration-{exploration_id}-{name}"'
-        return StreamingResponse(_stream(file), media_type=fmt.media_type,
-                                 headers={"Content-Disposition": disposition})
+        # Closed when the client goes away too (api/streams.py), not only once sent.
+        return ClosingStream(_stream(file), what=f"{name} of exploration {exploration_id}",
+                             media_type=fmt.media_type,
+                             headers={"Content-Disposition": disposition})
 
     responses: dict[int | str, dict[str, Any]] = {
         404: error("no such exploration"),

@@ -7,7 +7,6 @@ routes answer for running explorations too; `final` says whether the exploration
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, Request, Response
@@ -15,6 +14,7 @@ from fastapi.responses import StreamingResponse
 from graspscape.services.coordinator.api.deps import SessionDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import error
+from graspscape.services.coordinator.api.streams import ClosingStream
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds import best as ranking
@@ -266,15 +266,14 @@ def map_svg(exploration_id: Id, session: SessionDep, cut: Cut = "horizontal", ph
 def _stream_poses(exploration_id: int, request: Request, session: Any,
                   fmt: export.PoseFormat) -> StreamingResponse:
     """Every pose, streamed chunk by chunk from a server-side cursor, in a session of its own
-    (the request's closes when the route returns, before the body is sent)."""
+    (export.session_pieces; the request's is closed here: FastAPI closes it only after the
+    body is sent, so each stream held two connections). The stream stops, and gives its
+    connection back, when the client goes away (api/streams.py)."""
     manifolds.ensure_manifolds(session, exploration_id)
-    sessionmaker = request.app.state.sessionmaker
-
-    def pieces() -> Iterator[bytes]:
-        with sessionmaker() as own:
-            yield from export.pose_pieces(own, exploration_id, fmt)
-
-    return StreamingResponse(pieces(), media_type=export.MEDIA_TYPES[fmt])
+    session.close()
+    pieces = export.session_pieces(request.app.state.sessionmaker, exploration_id, fmt)
+    return ClosingStream(pieces, what=f"poses.{fmt} of exploration {exploration_id}",
+                         media_type=export.MEDIA_TYPES[fmt])
 
 
 @router.get("/explorations/{exploration_id}/export/poses.csv", response_class=StreamingResponse,

@@ -20,7 +20,7 @@ import csv
 import io
 import tempfile
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import IO, Any, Literal
 
 from graspscape.services.coordinator.manifolds.grouping import label_name
@@ -223,6 +223,23 @@ def pose_pieces(session: Session, exploration_id: int, fmt: PoseFormat) -> Itera
         return
     with tempfile.SpooledTemporaryFile(max_size=SPOOL_BYTES) as spool:
         write_parquet(chunks, spool)
+        spool.seek(0)
+        while block := spool.read(BLOCK_BYTES):
+            yield block
+
+
+def session_pieces(sessionmaker: Callable[[], Session], exploration_id: int,
+                   fmt: PoseFormat) -> Iterator[bytes]:
+    """`pose_pieces` in a session of its own, held no longer than the database is read: to
+    the CSV's last row, or until the Parquet file is written (its blocks are then sent from
+    the spool with the connection given back)."""
+    if fmt == "csv":
+        with sessionmaker() as own:
+            yield from pose_pieces(own, exploration_id, fmt)
+        return
+    with tempfile.SpooledTemporaryFile(max_size=SPOOL_BYTES) as spool:
+        with sessionmaker() as own:
+            write_parquet(row_chunks(own, exploration_id, for_csv=False), spool)
         spool.seek(0)
         while block := spool.read(BLOCK_BYTES):
             yield block
