@@ -6,6 +6,7 @@ routes answer for running explorations too; `final` says whether the exploration
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Annotated, Any, Literal
 
@@ -113,28 +114,43 @@ def _label_number(label: str) -> int:
     return n - 1
 
 
+def _json(content: bytes) -> Response:
+    return Response(content=content, media_type="application/json")
+
+
 @router.get("/explorations/{exploration_id}/manifolds", response_model=ManifoldList,
             responses=_NOT_FOUND, summary="The behavioral manifolds, largest first")
 def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
+    # The summaries' stored JSON text copied into the answer, the dust line from columns:
+    # nothing decoded, validated or encoded again per request (issue 21; migration 0012).
+    manifolds.ensure_manifolds(session, exploration_id)
+    final, items = manifolds.stored_texts(session, exploration_id)
+    small = [m for m in items if not m.large]
+    dust = (DustLine(manifolds=len(small), poses=sum(m.size for m in small),
+                     volume_cm3=round(sum(m.volume_cm3 for m in small), 3)).model_dump()
+            if small else None)
+    head = json.dumps({"exploration_id": exploration_id, "final": final})[:-1]
+    return _json(f'{head}, "manifolds": [{", ".join(m.summary for m in items)}], '
+                 f'"dust": {json.dumps(dust)}}}'.encode())
+
+
+def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
+    """The list as models (the JSON export adds its short rows to it)."""
     manifolds.ensure_manifolds(session, exploration_id)
     items = manifolds.stored_manifolds(session, exploration_id)
-    return ManifoldList(
-        exploration_id=exploration_id,
-        final=manifolds.is_final(session, exploration_id),
-        manifolds=items,
-        dust=_dust(items),
-    )
+    return ManifoldList(exploration_id=exploration_id,
+                        final=manifolds.is_final(session, exploration_id),
+                        manifolds=items, dust=_dust(items))
 
 
 @router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
             responses=_NOT_FOUND, summary="One manifold by its label")
 def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
     manifolds.ensure_manifolds(session, exploration_id)
-    number = _label_number(label)
-    for m in manifolds.stored_manifolds(session, exploration_id):
-        if m.label == number:
-            return m
-    raise NotFound(f"exploration {exploration_id} has no manifold {label}")
+    _, items = manifolds.stored_texts(session, exploration_id, _label_number(label))
+    if not items:
+        raise NotFound(f"exploration {exploration_id} has no manifold {label}")
+    return _json(items[0].summary.encode())
 
 
 @router.get(
@@ -298,5 +314,5 @@ def export_parquet(exploration_id: Id, request: Request, session: SessionDep) ->
             response_model=ManifoldTable, responses=_NOT_FOUND,
             summary="The manifold table (summaries and short rows), JSON")
 def export_manifolds(exploration_id: Id, session: SessionDep) -> Any:
-    listed = list_manifolds(exploration_id, session)
+    listed = _manifold_list(exploration_id, session)
     return ManifoldTable(**dict(listed), table=table_rows_of(listed.manifolds))

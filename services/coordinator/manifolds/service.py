@@ -45,7 +45,7 @@ from graspscape.services.coordinator.store.models import (
     PoseRow,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
-from sqlalchemy import bindparam, delete, select, update
+from sqlalchemy import Text, bindparam, cast, delete, select, update
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
@@ -142,6 +142,7 @@ def refresh_manifolds(
             exploration_id=exploration_id, label=m.label, signature=signature_of.get(m.best.key),
             size=m.pose_count, best_pose_key=m.best.key, best_mu_s=m.best.mu_s,
             summary=m.model_dump(mode="json"), core_volume_cm3=m.core_volume_cm3,
+            volume_cm3=m.volume_cm3,
             robust_best_key=m.robust_best.key if m.robust_best else None,
             robust_best_q=m.robust_best.q if m.robust_best else None, large=m.large,
         )
@@ -192,12 +193,22 @@ def store_robust_scores(session: Session, exploration_id: int,
     return len(changed)
 
 
+def _freshness(session: Session, exploration_id: int) -> Any:
+    """What says whether the stored manifolds are current, as one row of plain columns (the
+    ORM row would decode the exploration's spec on every read)."""
+    row = session.execute(
+        select(ExplorationRow.status, ExplorationRow.poses_done,
+               ExplorationRow.manifolds_poses_done, ExplorationRow.manifolds_final)
+        .where(ExplorationRow.id == exploration_id)).one_or_none()
+    if row is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    return row
+
+
 def ensure_manifolds(session: Session, exploration_id: int) -> ComputedMap | None:
     """Bring the stored manifolds up to date with the stored poses (commits if it had to).
     Returns the map where it had to compute it, else None (the stored one is current)."""
-    row = session.get(ExplorationRow, exploration_id)
-    if row is None:
-        raise NotFound(f"exploration {exploration_id} does not exist")
+    row = _freshness(session, exploration_id)
     done = row.status in FINISHED_STATUSES
     if row.manifolds_poses_done is not None:
         if row.manifolds_poses_done == row.poses_done and (row.manifolds_final or not done):
@@ -245,5 +256,32 @@ def stored_manifolds(session: Session, exploration_id: int) -> list[ManifoldSumm
 
 def is_final(session: Session, exploration_id: int) -> bool:
     """Whether the stored manifolds are those of the finished exploration."""
-    row = session.get(ExplorationRow, exploration_id)
-    return bool(row is not None and row.manifolds_final)
+    return bool(session.scalar(select(ExplorationRow.manifolds_final)
+                               .where(ExplorationRow.id == exploration_id)))
+
+
+@dataclass(frozen=True)
+class StoredText:
+    """A stored manifold as its summary's JSON text and the columns of the dust line."""
+
+    label: int
+    large: bool
+    size: int
+    volume_cm3: float
+    summary: str
+
+
+def stored_texts(session: Session, exploration_id: int,
+                 label: int | None = None) -> tuple[bool, list[StoredText]]:
+    """(final, the manifolds by label) without decoding a summary: the text as stored (the
+    routes copy it into their answer). One manifold with `label`. NotFound: no exploration."""
+    final = _freshness(session, exploration_id).manifolds_final
+    query = (select(ManifoldRow.label, ManifoldRow.large, ManifoldRow.size,
+                    ManifoldRow.volume_cm3, cast(ManifoldRow.summary, Text))
+             .where(ManifoldRow.exploration_id == exploration_id,
+                    ManifoldRow.summary.is_not(None)))
+    if label is not None:
+        query = query.where(ManifoldRow.label == label)
+    rows = session.execute(query.order_by(ManifoldRow.label)).all()
+    return bool(final), [StoredText(lab, bool(large), size, volume or 0.0, text)
+                         for lab, large, size, volume, text in rows]

@@ -161,6 +161,9 @@ class ManifoldRow(Base):
     robust_best_key: Mapped[str | None] = mapped_column(String(128))
     robust_best_q: Mapped[float | None] = mapped_column(Float)
     large: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+    # The summary's volume (migration 0012), so that /manifolds writes the dust line from
+    # columns and copies the summaries' stored text without decoding it.
+    volume_cm3: Mapped[float | None] = mapped_column(Float)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

@@ -1,0 +1,75 @@
+"""/manifolds and /manifolds/{label} copy the stored summaries' text into their answer (no
+decoding on the read path, issue 21): the same documents as the summaries decoded and
+validated, on both databases; migration 0012 fills the volume column of existing rows."""
+
+from __future__ import annotations
+
+import json
+import math
+
+from graspscape.services.coordinator import db
+from graspscape.services.coordinator.api.manifolds import ManifoldList, _manifold_list
+from graspscape.services.coordinator.exploration.scheduler import ingest_results
+from graspscape.services.coordinator.manifolds.grouping import label_name
+from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.store.models import ManifoldRow
+from graspscape.services.coordinator.store.queue import lease_tiles
+from sqlalchemy import create_engine, select, text
+
+from tests.factories import oracle_result
+
+GRID = {"dtheta": math.radians(30), "r_min": 0.0, "r_max": 0.02, "dr": 0.01,
+        "attitudes": {"rolls": 2}}
+
+
+def test_manifold_reads_are_the_stored_summaries(client, object_id, sessions) -> None:
+    eid = client.post("/explorations", json={
+        "object_id": object_id, "gripper": "robotiq_3f", "grid": GRID,
+        "strategy": {"name": "grid"}, "refinement": {"levels": 0}}).json()["id"]
+    with sessions() as s:
+        while tiles := lease_tiles(s, worker_id="w", n=8, lease_seconds=60):
+            for t in tiles:
+                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                               results=[oracle_result(p) for p in t.poses()])
+    listed = client.get(f"/explorations/{eid}/manifolds")
+    assert listed.status_code == 200 and listed.headers["content-type"] == "application/json"
+    got = ManifoldList.model_validate(listed.json())
+    with sessions() as s:
+        # The last manifold made dust, in its row and its summary: the dust line is written
+        # from the columns, and must be what the summaries say.
+        row = s.scalars(select(ManifoldRow).where(ManifoldRow.exploration_id == eid)
+                        .order_by(ManifoldRow.label.desc())).first()
+        row.large = False
+        row.summary = {**row.summary, "large": False}
+        s.commit()
+        expected = _manifold_list(eid, s)
+    assert len(got.manifolds) >= 2 and got.final
+    listed = client.get(f"/explorations/{eid}/manifolds").json()
+    assert listed == json.loads(expected.model_dump_json())
+    assert listed["dust"]["manifolds"] == 1
+    for m in expected.manifolds:
+        one = client.get(f"/explorations/{eid}/manifolds/{label_name(m.label)}")
+        assert one.status_code == 200
+        assert ManifoldSummary.model_validate(one.json()) == m
+    assert client.get(f"/explorations/{eid}/manifolds/ZZ").status_code == 404
+    assert client.get("/explorations/999999/manifolds").status_code == 404
+    assert client.get("/explorations/999999/manifolds/A").status_code == 404
+
+
+def test_migration_0012_fills_the_volume_from_the_summary(tmp_path) -> None:
+    url = f"sqlite:///{tmp_path / 'm.db'}"
+    db.upgrade(url, "0011")
+    engine = create_engine(url)
+    with engine.begin() as c:
+        c.execute(text("INSERT INTO objects (id, kind, name, properties, created_at) "
+                       "VALUES (1, 'named', 'sphere', '{}', '2026-01-01')"))
+        c.execute(text("INSERT INTO explorations (id, object_id, spec, status, tiles_total, "
+                       "poses_total, poses_done, viable_count, created_at, updated_at) VALUES "
+                       "(1, 1, '{}', 'done', 0, 0, 0, 0, '2026-01-01', '2026-01-01')"))
+        c.execute(text("INSERT INTO manifolds (id, exploration_id, label, size, summary, "
+                       "created_at) VALUES (1, 1, 0, 3, '{\"volume_cm3\": 12.5}', "
+                       "'2026-01-01')"))
+    db.upgrade(url, "head")
+    with engine.begin() as c:
+        assert c.execute(text("SELECT volume_cm3 FROM manifolds")).scalar() == 12.5
+    engine.dispose()
