@@ -74,6 +74,7 @@ def test_bad_objects_are_refused_by_the_worker_as_at_upload(
     assert [e.code for e in inspect_object(spec).errors] != []
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_units_bring_a_millimetre_mesh_to_metres(tmp_path: Path, cache_dir: Path) -> None:
     path = _file(tmp_path, "bunny_mm.obj", meshes.bunny_in_mm())
     with pytest.raises(WrongSize, match="give the file's units"):

@@ -142,6 +142,7 @@ def _weld(evaluator) -> int:
     return weld
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_object_welded_to_the_palm_passes_everything_with_the_smallest_margins(own_evaluator):
     ev = own_evaluator
     with ev.synthesized(Pose(theta=1.0, phi=0.5, r=0.02)) as (_, grasp):
@@ -225,6 +226,7 @@ def test_real_grasp_of_the_sphere_from_above_lies_between_the_anchors(sphere_eva
     assert 0.0 < report.shake_survival_s <= 3 * EVERY.shake_axis_s
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_tests_repeat_exactly_whatever_ran_before(own_evaluator):
     ev = own_evaluator
     chosen = RobustnessSettings(tests=("torque_margin", "shake"))
@@ -237,6 +239,7 @@ def test_tests_repeat_exactly_whatever_ran_before(own_evaluator):
     assert first.torque_margin_nm is not None
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_eval_pose_command_prints_the_report(sim_cache, monkeypatch, capsys):
     # `--robustness` alone runs every test; a choice keeps this test quick.
     import graspscape.workers.sim.evaluate as evaluate_module

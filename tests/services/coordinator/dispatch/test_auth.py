@@ -154,6 +154,7 @@ def test_a_worker_with_the_right_login_gets_work_and_a_wrong_one_never_reaches_i
     assert lease_queries(registry) == 1  # no query of theirs ever arrived
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_a_users_file_admits_each_of_its_users(
     sqlite_url: str, sqlite_sessions: sessionmaker[Session], tmp_path: Path
 ) -> None:

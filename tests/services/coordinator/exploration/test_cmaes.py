@@ -108,6 +108,7 @@ def test_oracle_best_is_what_the_oracle_gives() -> None:
     assert near_pole.viable and near_pole.mu_s == pytest.approx(ORACLE_BEST_MU_S, abs=1e-6)
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_resuming_the_kept_search_equals_replaying_from_the_seed() -> None:
     spec = ExplorationSpec(object_id=1, grid=GRID,
                            strategy={"name": "cmaes", "poses": 10_000, "seed": 4})

@@ -210,7 +210,8 @@ def test_symmetry_detected_from_the_mesh() -> None:
     ("cube", False, None, 1),  # a plain run keeps the equal-area lattice
     ("cube", True, None, 4),  # 90° turns and mirrors at 45°
     ("sphere", True, None, 8),  # every candidate: 8 is the largest order used
-    ("mug", True, None, 1),  # one mirror, in the handle's plane at φ = 0
+    pytest.param("mug", True, None, 1,  # one mirror, in the handle's plane at φ = 0
+                 marks=pytest.mark.slow),  # the mug's symmetry search: 1.5 s
     ("cube", True, 2, 2),  # as given
 ])
 def test_the_lattice_multiple_is_decided_at_submission_from_the_objects_symmetry(

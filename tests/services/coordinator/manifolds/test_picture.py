@@ -42,6 +42,7 @@ def explore(sessions, object_id: int) -> int:  # type: ignore[no-untyped-def]
     return eid
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_stored_points_are_the_computed_maps_points_and_labels(sessions, named_object) -> None:
     eid = explore(sessions, named_object("sphere"))
     with sessions() as s:
@@ -101,6 +102,7 @@ def test_the_3d_view_is_thinned_only_beyond_its_marker_budget() -> None:
                                              strict=True)}) == len(thinned)
 
 
+@pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 @pytest.mark.parametrize("db_url", ["sqlite"], indirect=True)
 def test_a_picture_is_kept_per_map_version_and_checks_its_attitude(sessions,
                                                                    named_object) -> None:
