@@ -165,6 +165,15 @@ def get_contact_points(client: int, body_a: int, body_b: int) -> list[ContactPoi
             p.getContactPoints(body_a, body_b, physicsClientId=client)]
 
 
+def touching_link_indices(client: int, body_a: int, body_b: int,
+                          max_distance: float) -> list[int]:
+    """Body A's link of every contact point with body B no further apart than
+    `max_distance`: what `get_contact_points` filtered by distance gives, without a record
+    per point (the approach and closing phases ask this every step or check)."""
+    return [c[3] for c in p.getContactPoints(body_a, body_b, physicsClientId=client)
+            if c[8] <= max_distance]  # linkIndexA, contactDistance
+
+
 def get_closest_points(client: int, body_a: int, body_b: int, distance: float, *,
                        link_a: int | None = None) -> list[ContactPoint]:
     """Point pairs closer than `distance` (of link `link_a` of body A only, if given)."""
@@ -187,6 +196,12 @@ def get_joint_state(client: int, body: int, joint: int) -> JointState:
 
 def get_joint_states(client: int, body: int, joints: list[int]) -> list[JointState]:
     return [JointState(*s) for s in p.getJointStates(body, joints, physicsClientId=client)]
+
+
+def max_abs_motor_torque(client: int, body: int, joints: list[int]) -> float:
+    """The largest |appliedJointMotorTorque| of `joints` (the trajectory reads it every
+    step: no record per joint)."""
+    return max(abs(s[3]) for s in p.getJointStates(body, joints, physicsClientId=client))
 
 
 def get_joint_positions(client: int, body: int, joints: list[int]) -> list[float]:

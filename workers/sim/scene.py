@@ -4,7 +4,7 @@ Policies and the robustness tests drive it through these methods."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pybullet as p
@@ -13,6 +13,7 @@ from graspscape.workers.sim.bullet import (
     get_contact_points,
     get_pose,
     matrix_from_quat,
+    touching_link_indices,
 )
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.gripper.hand import Hand
@@ -32,11 +33,18 @@ class Scene:
     fixture_constraint: int
     offset: np.ndarray
     dt: float
+    # The last rotation drive_to converted, as bytes, and its quaternion: the approach drives
+    # to one rotation every step, which needs converting once.
+    _last_rotation: tuple[bytes, list[float]] = field(default=(b"", []), init=False,
+                                                      repr=False)
 
     def drive_to(self, position: np.ndarray, rotation: np.ndarray,
                  max_force: float = DRIVE_MAX_FORCE_N) -> None:
+        key = rotation.tobytes()
+        if key != self._last_rotation[0]:
+            self._last_rotation = (key, quat_from_matrix(rotation))
         p.changeConstraint(self.drive_constraint, jointChildPivot=position.tolist(),
-                           jointChildFrameOrientation=quat_from_matrix(rotation),
+                           jointChildFrameOrientation=self._last_rotation[1],
                            maxForce=max_force, physicsClientId=self.client)
 
     def drive_to_quat(self, position: list[float], quaternion: list[float],
@@ -51,14 +59,19 @@ class Scene:
         p.stepSimulation(physicsClientId=self.client)
 
     def in_contact(self) -> bool:
-        return bool(self.contacts())
+        return bool(self._touching())
 
     def palm_in_contact(self) -> bool:
-        return any(c.link_index_a == -1 for c in self.contacts())
+        return -1 in self._touching()
 
     def touching_links(self) -> frozenset[int]:
         """Indices of the hand's links that touch the object (the palm is -1)."""
-        return frozenset(c.link_index_a for c in self.contacts())
+        return frozenset(self._touching())
+
+    def _touching(self) -> list[int]:
+        """The hand's link of each of `contacts()`, read without building their records."""
+        return touching_link_indices(self.client, self.hand.body, self.object_body,
+                                     CONTACT_DISTANCE_M)
 
     def contacts(self) -> list[ContactPoint]:
         """The hand's contact points with the object (A: the hand, B: the object)."""

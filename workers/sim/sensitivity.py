@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import pybullet as p
@@ -120,6 +121,15 @@ def responses(perturbed: Snapshot, reference: Snapshot) -> tuple[np.ndarray, np.
     return base, relative
 
 
+@lru_cache(maxsize=1024)
+def _turn(axis: int, angle: float) -> np.ndarray:
+    """axis_rotation, kept: an angular rollout's turns depend on the window step alone, so
+    every instant of every grasp uses the same few (read-only: shared)."""
+    turn = axis_rotation(axis, angle)
+    turn.setflags(write=False)
+    return turn
+
+
 def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSettings,
                   length: float, *, state: int | None = None) -> float:
     """Quality 1 − σ_max(S) at trajectory step `step`.
@@ -138,25 +148,31 @@ def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSetting
     central = metric.differences == "central"
     linear = metric.perturbation_m_s2
     angular = metric.angular_perturbation_rad_s2
-    restore_clean(ctx, state)
-    anchor_local = anchor_point(ctx)
-    pivot = np.array(get_point(cid, ctx.object_body))
+    # The instant's anchor and the object's centre, read once the first rollout has restored
+    # the state (every rollout restores the same one, so no restore of their own is needed).
+    start: list[np.ndarray] = []
 
     quick = ctx.target_drive is not None and ctx.drive_quat is not None
 
     def rollout(axis: int | None, sign: float = 1.0) -> Snapshot:
         restore_clean(ctx, state)
-        for j in range(1, window + 1):
-            if quick and (axis is None or axis < 3):
-                position_list, quaternion = ctx.target_drive(step + j)  # type: ignore[misc]
+        if not start:
+            start.extend((anchor_point(ctx), np.array(get_point(cid, ctx.object_body))))
+        anchor_local, pivot = start
+        if quick and (axis is None or axis < 3):
+            target_drive, drive_quat = ctx.target_drive, ctx.drive_quat
+            for j in range(1, window + 1):
+                position_list, quaternion = target_drive(step + j)  # type: ignore[misc]
                 if axis is not None:
-                    # As drive_to would: the offset added to the array, then listed.
-                    offset = np.zeros(3)
-                    offset[axis] = linear * (sign * 0.5 * (j * dt) ** 2)
-                    position_list = (ctx.target(step + j)[0] + offset).tolist()
-                ctx.drive_quat(position_list, quaternion)  # type: ignore[misc]
+                    # As drive_to would list (position + offset), offset 0 but on `axis`: in
+                    # Python floats, the same IEEE sums (x + 0.0 included, which maps -0 to 0).
+                    moved = [x + 0.0 for x in position_list]
+                    moved[axis] = position_list[axis] + linear * (sign * 0.5 * (j * dt) ** 2)
+                    position_list = moved
+                drive_quat(position_list, quaternion)  # type: ignore[misc]
                 p.stepSimulation(physicsClientId=cid)
-                continue
+            return snapshot(ctx, anchor_local)
+        for j in range(1, window + 1):
             position, rotation = ctx.target(step + j)
             if axis is not None:
                 amount = sign * 0.5 * (j * dt) ** 2
@@ -165,7 +181,7 @@ def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSetting
                     offset[axis] = linear * amount
                     position = position + offset
                 else:
-                    turn = axis_rotation(axis - 3, angular * amount)
+                    turn = _turn(axis - 3, angular * amount)
                     position = pivot + turn @ (position - pivot)
                     rotation = turn @ rotation
             ctx.drive(position, rotation)

@@ -45,23 +45,26 @@ class BaselinePolicy:
         stopped = scene.palm_in_contact()
         last = start = hand.frame_pose()[0]
         max_steps = round(APPROACH_TIME_CAP_S / dt)
-        while not stopped and phases.approach_steps < max_steps:
+        # Counted here and stored once: a pydantic attribute costs microseconds a step.
+        steps = phases.approach_steps
+        while not stopped and steps < max_steps:
             speed = min(speed + accel * dt, settings.approach_speed_cap_m_s)
             commanded = commanded + direction * speed * dt
             if np.dot(goal - commanded, direction) < 0:
                 commanded = goal
             scene.drive_to(commanded, rotation, max_force=settings.approach_force_n)
             scene.step()
-            phases.approach_steps += 1
+            steps += 1
             if scene.palm_in_contact():
                 break
-            if phases.approach_steps % settings.check_every_steps == 0:
+            if steps % settings.check_every_steps == 0:
                 now = hand.frame_pose()[0]
                 if np.dot(now - start, direction) >= travel_limit:
                     break
                 stopped = bool(np.linalg.norm(now - last) < BLOCKED_ADVANCE_M
                                and scene.in_contact())
                 last = now
+        phases.approach_steps = steps
         phases.approach_s = time.perf_counter() - t0
         if not scene.in_contact():
             return Outcome.NO_CONTACT

@@ -18,12 +18,14 @@ def close_fingers(scene, settings: BaselinePolicySettings,
     scene.drive_to(held_pos, held_rot)
     hand.begin_closing(settings.closing_speed)
     cap = max(1, round(settings.closing_cap_s / scene.dt))
+    steps = 0  # stored once below: a pydantic attribute costs microseconds a step
     for step in range(1, cap + 1):
         scene.step()
-        phases.closing_steps += 1
+        steps += 1
         if step % settings.check_every_steps == 0 and hand.update_closing(
                 settings.stall_tolerance, scene.touching_links()):
             break
+    phases.closing_steps += steps
     hand.settle(scene.touching_links())
     phases.closing_s = time.perf_counter() - started
     return None if scene.in_contact() else Outcome.NO_GRASP
