@@ -1,13 +1,10 @@
 // Graspscape viewer: one page, four views chosen by the URL hash (#/, #/exploration/ID,
 // #/submit, #/workers). Live numbers come from one EventSource on /events/explorations;
 // everything else is the coordinator's REST API. No framework, no build step.
+import { TAB10, labelName } from "./palette.js";
 
 const main = document.getElementById("main");
 const live = document.getElementById("live");
-
-// The map pictures colour manifold k with matplotlib's tab10[k % 10]; the page does the same.
-export const TAB10 = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
-  "#e377c2", "#7f7f7f", "#bcbd22", "#17becf"];
 
 const KNOWN_MANIFOLD_FIELDS = new Set(["label", "name", "description", "digits", "pose_count",
   "evaluated_count", "volume_cm3", "mu_s_min", "mu_s_mean", "mu_s_max", "mu_s_std", "best",
@@ -52,14 +49,6 @@ function duration(s) {
 }
 
 function pct(x) { return x === null || x === undefined ? "–" : `${(100 * x).toFixed(1)} %`; }
-
-function labelName(n) {
-  if (n < 0) return "–";
-  let s = "";
-  n += 1;
-  while (n > 0) { const r = (n - 1) % 26; s = String.fromCharCode(65 + r) + s; n = Math.floor((n - 1) / 26); }
-  return s;
-}
 
 async function getJSON(url, options = {}) {
   const res = await fetch(url, options);
@@ -298,7 +287,9 @@ async function viewExploration(id) {
           const pose = await getJSON(`/web/explorations/${id}/poses/${poseId}`);
           await showGrasp(id, pose, graspBox, `Grasp of pose ${poseId}`);
         });
-        await view.loadMesh(`/explorations/${id}/export/object.obj`);
+        const res = await fetch(`/explorations/${id}/export/object.obj`);
+        if (!res.ok) throw new Error(`object mesh: ${res.status}`);
+        view.loadMesh(await res.text());
       }
       await view.loadDirections(await getJSON(`/web/explorations/${id}/directions`));
     } catch (err) { legend.textContent = `3D view unavailable: ${err.message || err}`; }

@@ -1,9 +1,12 @@
 // The 3D view of one exploration: the object's mesh (its COM frame, as exported) and a marker
 // per viable approach direction, coloured by manifold like the map pictures. Drag or arrow
 // keys rotate, wheel or +/− zoom; clicking a marker shows that pose's grasp.
+// The live viewer loads this module as it is ("three" through the page's import map); the
+// static atlas gets it bundled with three.js into one classic script (bundle/build.mjs), as
+// browsers load no module from file://. So: relative imports, and no fetch in here.
 import * as THREE from "three";
-import { OrbitControls } from "/static/vendor/OrbitControls.js";
-import { OBJLoader } from "/static/vendor/OBJLoader.js";
+import { OrbitControls } from "./vendor/OrbitControls.js";
+import { OBJLoader } from "./vendor/OBJLoader.js";
 
 function webglAvailable(canvas) {
   try {
@@ -20,6 +23,7 @@ export class View3D {
     this.palette = palette;
     this.labelName = labelName;
     this.onPick = onPick;
+    this.pickShows = "grasp"; // what a click on a marker shows, for the legend
     this.radius = 0.1;
     this.points = null;
     this.poseIds = [];
@@ -77,10 +81,9 @@ export class View3D {
     this.render();
   }
 
-  async loadMesh(url) {
-    const res = await fetch(url);
-    if (!res.ok) throw new Error(`object mesh: ${res.status}`);
-    const obj = new OBJLoader().parse(await res.text());
+  // The object's mesh as OBJ text (the `object.obj` export).
+  loadMesh(text) {
+    const obj = new OBJLoader().parse(text);
     const material = new THREE.MeshStandardMaterial({ color: 0x9a9a9a, roughness: 0.7, flatShading: true });
     obj.traverse((child) => { if (child.isMesh) child.material = material; });
     this.scene.add(obj);
@@ -122,7 +125,7 @@ export class View3D {
     const parts = [...counts.entries()].sort((a, b) => a[0] - b[0]).slice(0, 12)
       .map(([label, k]) => `${label >= 0 ? this.labelName(label) : "none"}: ${k}`);
     this.legend.textContent = `${n} of ${d.total_viable} viable poses shown (${parts.join(", ")}). ` +
-      "Drag or arrow keys rotate, wheel or +/− zoom, click a marker for its grasp.";
+      `Drag or arrow keys rotate, wheel or +/− zoom, click a marker for its ${this.pickShows}.`;
     this.canvas.dataset.points = String(n);
   }
 
@@ -135,6 +138,6 @@ export class View3D {
     ray.params.Points.threshold = this.radius / 15;
     ray.setFromCamera(mouse, this.camera);
     const hit = ray.intersectObject(this.points)[0];
-    if (hit) this.onPick(this.poseIds[hit.index]);
+    if (hit) this.onPick(this.poseIds[hit.index], hit.index);
   }
 }
