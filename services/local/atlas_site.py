@@ -1,16 +1,20 @@
-"""The atlas's static site: the viewer's pages pre-rendered as plain HTML that opens from disk
-(file://, no server, no script), with each object's exports beside its page.
+"""The atlas's static site: the viewer's pages pre-rendered as HTML that opens from disk
+(file://, no server), with each object's exports beside its page.
 
   index.html              every object: poses, viable share, manifolds, time, its map
   atlas.json              the setting and each object's numbers (what the benchmark reads)
   style.css               the viewer's stylesheet
-  <object>/index.html     the exploration page: numbers, the map cut both ways, the manifold
-                          table, the best grasp of each manifold (picture and numbers)
+  atlas3d.js              the viewer's 3D view with three.js as one classic script
+  <object>/index.html     the exploration page: numbers, the map cut both ways, the 3D view,
+                          the manifold table, the best grasp of each manifold
+  <object>/view3d-data.js the 3D view's data: the mesh (OBJ text) and the viable approach
+                          directions with their manifold labels
   <object>/map-*.png, map.svg, manifolds.json, poses.csv, object.obj, graspgen.json,
   grasp-<label>.png
 
-The 3D view of the live viewer is a WebGL module, which browsers do not load from file://;
-the map picture's own 3D panel stands in for it here.
+Browsers load no ES module and fetch nothing from file://, so the 3D view is the live
+viewer's view3d.js bundled with three.js into one classic script (static/atlas3d.js, built by
+services/coordinator/web/bundle/build.mjs) and each page's data is a script too.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from graspscape.services.coordinator.manifolds import service as manifolds
 from graspscape.services.coordinator.manifolds.summary import table_rows_of
 from graspscape.services.coordinator.maps.picture import picture_bytes
 from graspscape.services.coordinator.store.models import ExplorationRow
+from graspscape.services.coordinator.web.data import directions
 from graspscape.services.coordinator.web.grasp import grasp_png, has_painter
 from graspscape.services.coordinator.web.router import STATIC_DIR
 from graspscape.services.local.atlas import AtlasEntry, AtlasSetting
@@ -38,6 +43,8 @@ from sqlalchemy.orm import Session, sessionmaker
 _KNOWN = {"label", "name", "description", "digits", "pose_count", "evaluated_count",
           "volume_cm3", "mu_s_min", "mu_s_mean", "mu_s_max", "mu_s_std", "best", "local_maxima"}
 MAX_GRASP_PICTURES = 6  # per object: the largest manifolds (a simulation each)
+MAX_DIRECTIONS = 20_000  # markers in the 3D view, as the live viewer's default
+BUNDLE = "atlas3d.js"
 
 
 def _e(x: Any) -> str:
@@ -60,7 +67,7 @@ def slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "object"
 
 
-def _page(title: str, body: str, root: str) -> str:
+def _page(title: str, body: str, root: str, scripts: str = "") -> str:
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
@@ -71,7 +78,8 @@ def _page(title: str, body: str, root: str) -> str:
 <nav aria-label="Pages"><a href="{root}index.html">Objects</a></nav></header>
 <main id="main">{body}</main>
 <footer>Pre-rendered by <code>graspscape atlas</code>; the live viewer is
-<code>graspscape serve</code> at <code>/</code>.</footer></body></html>
+<code>graspscape serve</code> at <code>/</code>. 3D view by three.js 0.170.0 (MIT).
+</footer>{scripts}</body></html>
 """
 
 
@@ -97,6 +105,23 @@ def _write_exports(session: Session, eid: int, folder: Path) -> list[str]:
         except Exception:  # no mesh in this process: the page says what is missing
             (folder / name).unlink(missing_ok=True)
     return written
+
+
+def write_3d_data(session: Session, eid: int, folder: Path, exports: list[str]) -> None:
+    """view3d-data.js: one assignment the bundle reads (a script, as file:// allows no fetch)."""
+    mesh = (folder / "object.obj").read_text() if "object.obj" in exports else None
+    data = {"obj": mesh,
+            "directions": directions(session, eid, MAX_DIRECTIONS).model_dump(mode="json")}
+    # JSON is a JS expression; "</" escaped anyway, should the file ever be inlined in HTML.
+    text = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
+    (folder / "view3d-data.js").write_text(f"window.GRASPSCAPE_ATLAS_3D = {text};\n")
+
+
+_VIEW3D = ('<section class="panel" aria-label="3D view"><h3>Approach directions</h3>'
+           '<canvas id="view3d" tabindex="0" aria-label="3D view of the object with the viable '
+           'approach directions; arrow keys rotate"></canvas>'
+           '<p class="note" id="legend3d">The 3D view needs JavaScript and WebGL.</p>'
+           '<div id="picked3d" aria-live="polite"></div></section>')
 
 
 def _pose_numbers(pose: Any) -> str:
@@ -127,6 +152,7 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
              "table": table_rows_of(listed)}
     (folder / "manifolds.json").write_text(json.dumps(table, indent=1))
     exports = _write_exports(session, eid, folder)
+    write_3d_data(session, eid, folder, exports)
     dumped = table["manifolds"]
     extra = sorted({k for m in dumped for k, v in m.items()
                     if k not in _KNOWN and not isinstance(v, dict | list)})
@@ -161,13 +187,15 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
     body = (f"<h2>{_e(entry.name)}</h2>{facts}"
             '<div class="grid"><section class="panel map"><h3>Horizontal cut</h3>'
             f'<img src="map-horizontal.png" alt="behavioral map of {_e(entry.name)}, '
-            'horizontal cut, and a 3D view"></section>'
+            f'horizontal cut, and a 3D view"></section>{_VIEW3D}'
             '<section class="panel map"><h3>Vertical cut (φ0 = 0°)</h3>'
             f'<img src="map-vertical.png" alt="behavioral map of {_e(entry.name)}, '
             'vertical cut"></section></div>'
             f"<h3>Manifolds</h3>{_table(head, rows, numeric)}{''.join(grasps)}"
             f'<p class="exports">Exports: {links}</p>')
-    (folder / "index.html").write_text(_page(f"{entry.name} — Graspscape atlas", body, "../"))
+    scripts = f'<script src="view3d-data.js"></script><script src="../{BUNDLE}"></script>'
+    (folder / "index.html").write_text(
+        _page(f"{entry.name} — Graspscape atlas", body, "../", scripts))
     return {"name": entry.name, "exploration_id": eid, "status": row.status,
             "poses": row.poses_done, "viable_share": viable, "manifolds": len(listed),
             "wall_s": entry.wall_s, "skipped": entry.skipped, "folder": folder.name,
@@ -186,7 +214,8 @@ def write_site(sessions: sessionmaker[Session], entries: list[AtlasEntry], out: 
                setting: AtlasSetting, *, pictures: bool = True) -> Path:
     """Write the site under `out` (its pages replaced, other files left); the index path."""
     out.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(STATIC_DIR / "style.css", out / "style.css")
+    for name in ("style.css", BUNDLE):
+        shutil.copyfile(STATIC_DIR / name, out / name)
     summaries = []
     for entry in entries:
         with sessions() as session:

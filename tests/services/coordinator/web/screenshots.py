@@ -1,5 +1,7 @@
 """Screenshots of every viewer page: `python -m tests.services.coordinator.web.screenshots
-BASE_URL EXPLORATION_ID OUT_DIR` (docs/img/viewer-*.png were taken so, of a mug exploration)."""
+BASE_URL EXPLORATION_ID OUT_DIR` (docs/img/viewer-*.png were taken so, of a mug exploration),
+and of an atlas object page opened from disk: `python -m tests.services.coordinator.web.
+screenshots --atlas SITE_DIR OBJECT_FOLDER OUT_DIR` (docs/img/viewer-atlas.png, of the mug)."""
 
 from __future__ import annotations
 
@@ -27,18 +29,31 @@ def shoot(page: Any, base: str, exploration_id: int, out: Path) -> list[Path]:
     return files
 
 
+def shoot_atlas(page: Any, site: Path, folder: str, out: Path) -> Path:
+    """The object page of an atlas site, from file://, its 3D view drawn."""
+    out.mkdir(parents=True, exist_ok=True)
+    page.goto((site / folder / "index.html").resolve().as_uri())
+    page.wait_for_load_state("load")
+    page.locator("#view3d[data-ready='1']").wait_for()
+    page.screenshot(path=out / "viewer-atlas.png", full_page=True)
+    return out / "viewer-atlas.png"
+
+
 def main() -> int:
     from playwright.sync_api import sync_playwright
 
     from tests.services.coordinator.web.live import CHROMIUM_ARGS, chromium_executable
 
-    base, exploration_id, out = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3])
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium_executable(), args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": 1280, "height": 900})
         page.set_default_timeout(120_000)
-        for f in shoot(page, base, exploration_id, out):
-            print(f)
+        if sys.argv[1] == "--atlas":
+            print(shoot_atlas(page, Path(sys.argv[2]), sys.argv[3], Path(sys.argv[4])))
+        else:
+            base, exploration_id, out = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3])
+            for f in shoot(page, base, exploration_id, out):
+                print(f)
         browser.close()
     return 0
 
