@@ -8,6 +8,10 @@ or not, and the same grasp type) on which both agree.
     .venv/bin/python benchmarks/bench_eval_pose.py            # writes results/eval_pose.json
     .venv/bin/python benchmarks/bench_eval_pose.py --scaling-only --procs 1,2,4,8,16
                                                   # 16-core scaling: eval_pose_scaling.json
+    .venv/bin/python benchmarks/bench_eval_pose.py --against REV --rounds 2
+        # also the grid on the code at git revision REV and on this tree, alternating, each in
+        # a process of its own: the results must be identical (every field but timings), and
+        # the CPU figures of both come from one run, on one machine load
 """
 
 from __future__ import annotations
@@ -16,6 +20,8 @@ import argparse
 import json
 import math
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -161,6 +167,50 @@ def step_split(obj: ObjectSpec, settings: SimSettings, poses: list[Pose]) -> dic
     return seconds
 
 
+def against(rev: str, rounds: int, obj_name: str) -> tuple[dict[str, float], dict]:
+    """The grid on the code at git revision `rev` ("before") and on this tree ("after"),
+    `rounds` times each, alternating (before, after, then after, before, ...), each in a fresh
+    process (eval_pose_tree.py): whether every result is identical but its timings, and each
+    tree's CPU figures summed over its rounds."""
+    repo = Path(__file__).resolve().parents[1]
+    child = Path(__file__).with_name("eval_pose_tree.py")
+    runs: dict[str, list[dict]] = {"before": [], "after": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        before = Path(tmp)
+        # The whole tree: the code finds its configs (grippers) next to its packages.
+        archive = subprocess.run(["git", "-C", str(repo), "archive", rev], check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(before)], input=archive, check=True)
+        trees = [("before", before), ("after", repo)]
+        for k in range(rounds):
+            for name, tree in trees if k % 2 == 0 else trees[::-1]:
+                out = subprocess.run([sys.executable, str(child), str(tree), obj_name],
+                                     check=True, capture_output=True, text=True).stdout
+                runs[name].append(json.loads(out.splitlines()[-1]))
+                print(f"round {k}, {name}: {runs[name][-1]['cpu_s']:.2f} CPU-s", flush=True)
+    first = runs["before"][0]["results"]
+    figures: dict[str, float] = {
+        "against_rounds": rounds,
+        "against_identical_results": float(all(
+            r["results"] == first for r in runs["before"] + runs["after"])),
+        "against_poses_differing": sum(
+            a != b for a, b in zip(first, runs["after"][0]["results"], strict=True)),
+    }
+    n = len(first) * rounds
+    for name, tree_runs in runs.items():
+        cpu = sum(r["cpu_s"] for r in tree_runs)
+        step = sum(r["step_cpu_s"] for r in tree_runs)
+        figures[f"{name}_evals_per_cpu_s"] = n / cpu
+        figures[f"{name}_step_share_of_evaluation_cpu"] = step / cpu
+        figures[f"{name}_engine_floor_evals_per_cpu_s"] = n / step
+        figures[f"{name}_outside_step_cpu_ms_per_eval"] = 1000 * (cpu - step) / n
+    figures["against_cpu_saved_share"] = (
+        1 - figures["before_evals_per_cpu_s"] / figures["after_evals_per_cpu_s"])
+    head = subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
+                          capture_output=True, text=True).stdout.strip()
+    return figures, {"against": rev, "after": f"working tree at {head}"}
+
+
 def agree(a: PoseResult, b: PoseResult) -> bool:
     if a.viable != b.viable:
         return False
@@ -187,7 +237,11 @@ def main() -> None:
                         "each evaluating the grid (issue 21 item 6)")
     parser.add_argument("--scaling-only", action="store_true",
                         help="only the scaling run (--procs), written to eval_pose_scaling.json")
+    parser.add_argument("--against", metavar="REV", help="also the grid on the code at git "
+                        "revision REV and on this tree, alternating: identical results? CPU?")
+    parser.add_argument("--rounds", type=int, default=2, help="runs of each tree (--against)")
     args = parser.parse_args()
+    load_before = os.getloadavg()
     if args.scaling_only:
         figures = scaling(args.object, [int(k) for k in (args.procs or "1,2").split(",")])
         write_results("eval_pose_scaling", figures, {"object": args.object,
@@ -254,8 +308,17 @@ def main() -> None:
     print("outcomes:", outcomes)
     if args.procs:
         figures.update(scaling(args.object, [int(k) for k in args.procs.split(",")]))
+    extra: dict = {"object": args.object, "outcomes": outcomes}
+    if args.against:
+        compared, trees = against(args.against, args.rounds, args.object)
+        figures.update(compared)
+        extra.update(trees)
+    # The machine's load (1, 5, 15 min) as the run began and ended: other processes share
+    # the cores, and wall-clock figures move with them (CPU figures much less).
+    extra["load_average_start"] = list(load_before)
+    extra["load_average_end"] = list(os.getloadavg())
     if not args.no_write:
-        write_results("eval_pose", figures, {"object": args.object, "outcomes": outcomes})
+        write_results("eval_pose", figures, extra)
     else:
         print(figures)
 

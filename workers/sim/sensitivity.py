@@ -131,12 +131,14 @@ def _turn(axis: int, angle: float) -> np.ndarray:
 
 
 def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSettings,
-                  length: float, *, state: int | None = None) -> float:
+                  length: float, *, state: int | None = None, restore: bool = True) -> float:
     """Quality 1 − σ_max(S) at trajectory step `step`.
 
     `state`: a saved state of this instant to roll out from (otherwise the present state is
     saved first). Every rollout, the unperturbed one included, starts from it through
-    `restore_clean`, so all see the same start; the state is restored at the end.
+    `restore_clean`, so all see the same start; the state is restored at the end, unless
+    `restore` is False and an exception did not cut the probe short (for a caller that
+    restores a state of its own next: the evaluator's probes, after the trajectory).
     With `metric.differences == "central"`, ±ε rollouts instead of +ε and an unperturbed one:
     the perturbation's even-order effects cancel (12 rollouts instead of 7).
     """
@@ -196,6 +198,9 @@ def probe_instant(ctx: ProbeContext, step: int, dt: float, metric: MetricSetting
             if central:
                 reference = rollout(axis, -1.0)
             d_base[:, axis], d_rel[:, axis] = responses(rollout(axis), reference)
-    finally:
+    except BaseException:
+        restore_clean(ctx, state)
+        raise
+    if restore:
         restore_clean(ctx, state)
     return instant_quality_of_deviation(deviation_matrix(d_base, d_rel, length))
