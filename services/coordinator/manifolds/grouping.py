@@ -95,6 +95,7 @@ def _merge_specks(
     owner_of: Callable[[Point], int | None] | None = None,
     neighbours_of: Callable[[Point], Iterable[Point]] | None = None,
     near: Callable[[Point, Point], bool] | None = None,
+    merged_out: dict[int, int] | None = None,
 ) -> list[list[Point]]:
     """Fold specks (fewer than max(MIN_POSES, MIN_SHARE of the viable poses) members) into
     the larger neighbouring component they nearly match most often (same digits, joints
@@ -105,7 +106,8 @@ def _merge_specks(
     that keeps the components (manifolds/incremental.py) passes its own instead of the
     index built here over every point, and may pass its caches of p's lattice neighbours at
     all its levels (`neighbours_of`) and of the tolerance test (`near`). Components not
-    merged are returned as given (the same list objects, already sorted)."""
+    merged are returned as given (the same list objects, already sorted). `merged_out`
+    receives which speck (index into `comps`) went into which component."""
     n_viable = sum(len(c) for c in comps)
     small = max(MIN_POSES, math.ceil(MIN_SHARE * n_viable))
     if owner_of is None:
@@ -127,6 +129,8 @@ def _merge_specks(
                     votes[j] += 1
         if votes:
             merged[i] = min(votes, key=lambda j: (-votes[j], j))
+    if merged_out is not None:
+        merged_out.update(merged)
     if not merged:  # the usual case: every component as it is, in its order
         return comps
     out: dict[int, list[Point]] = {}
@@ -167,14 +171,89 @@ class FineLabels:
     position_ids: np.ndarray  # points sharing a position (all attitudes) share an id
 
 
-def _embed(lattice: Lattice, pts: list[Point]) -> np.ndarray:
+@dataclass(frozen=True)
+class FineGrid:
+    """The finest lattice's positions (cell × r index; every attitude shares them), each
+    with its embedding for the nearest-pose search and the m³ it stands for."""
+
+    cells: list[tuple[int, int]]
+    n_i: int  # r indices per cell
+    n_a: int  # attitudes
+    embedding: np.ndarray  # (positions, 4)
+    weights: np.ndarray  # (positions,) m³
+    weights_exact: list[int]  # the same, exact (manifolds/exact.py)
+    cell_index: dict[tuple[int, int], int]
+
+    def position(self, p: Point) -> int:
+        return self.cell_index[(p.ring, p.azimuth)] * self.n_i + p.r_index
+
+
+def fine_grid(lattice: Lattice, radius: Callable[[np.ndarray], np.ndarray]) -> FineGrid:
+    from graspscape.services.coordinator.manifolds.exact import exact
+
+    cells = lattice.cells(lattice.depth)
+    n_i = (lattice.n_r << lattice.depth) + 1
+    dirs = np.array([lattice.direction(Point(K, J, 0, 0)) for K, J in cells])
+    rho_s = radius(dirs)
+    d = lattice.depth
+    dr = lattice.dr(d)
+    r0 = lattice.grid.r_min
+    r_top = lattice.grid.r_min + lattice.n_r * lattice.grid.dr
     # One coarse r step weighs as much as one coarse angular step.
     scale = lattice.dtheta(0) / lattice.grid.dr if lattice.grid.dr > 0 else 0.0
-    out = np.empty((len(pts), 4))
-    for i, p in enumerate(pts):
-        x, y, z = lattice.direction(p)
-        out[i] = (x, y, z, p.r_index * lattice.dr(lattice.depth) * scale)
-    return out
+    weights = []
+    embedding = np.empty((len(cells) * n_i, 4))
+    for c, (K, _) in enumerate(cells):
+        omega = lattice.cell_area(K, d)
+        for i in range(n_i):
+            r = r0 + i * dr
+            lo, hi = max(r0, r - dr / 2), min(r_top, r + dr / 2)
+            if hi <= lo:  # a single r level: a shell of one Δr
+                lo, hi = r - lattice.grid.dr / 2, r + lattice.grid.dr / 2
+            weights.append(omega * ((rho_s[c] + hi) ** 3 - (rho_s[c] + lo) ** 3) / 3)
+            embedding[c * n_i + i] = (*dirs[c], i * dr * scale)
+    return FineGrid(cells, n_i, len(lattice.attitudes), embedding, np.array(weights),
+                    [exact(float(w)) for w in weights], {kj: c for c, kj in enumerate(cells)})
+
+
+def sq_dist(fine: np.ndarray, sample: np.ndarray) -> np.ndarray:
+    """Squared distances, fine embeddings minus sample embeddings (broadcast), rounded to
+    1e-12: equal distances of a symmetric lattice compare equal, and the nearest pose is
+    then the smaller point. Written term by term so that every caller gets the same bits."""
+    d = fine - sample
+    return np.round(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
+                    + d[..., 3] * d[..., 3], 12)
+
+
+_K = 8  # nearest candidates asked of the tree; more only where the 8th may tie
+
+
+def nearest_known(grid: FineGrid, known: list[Point],
+                  positions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """For each position (every one when None), the index into `known` (sorted points of one
+    attitude) of its nearest known pose and the rounded squared distance: the smallest
+    `sq_dist`, ties to the smaller point. The tree finds candidates; the choice is
+    `sq_dist`'s, so that the running map (manifolds/running.py), which asks this of each
+    batch and keeps the better of it and what it had, chooses as the full recompute does."""
+    emb = grid.embedding if positions is None else grid.embedding[positions]
+    own = grid.embedding[[grid.position(p) for p in known]]
+    tree = cKDTree(own)
+    k = min(_K, len(known))
+    dist, idx = tree.query(emb, k=k)
+    if k == 1:
+        idx = np.asarray(idx, dtype=np.int64)
+        return idx, sq_dist(emb, own[idx])
+    d2 = sq_dist(emb[:, None, :], own[idx])
+    order = np.lexsort((idx, d2), axis=-1)[:, 0]
+    rows = np.arange(len(emb))
+    best, best_d2 = idx[rows, order], d2[rows, order]
+    if k < len(known):  # a pose beyond the k-th may tie with the nearest: ask for all
+        for f in np.flatnonzero(dist[:, -1] ** 2 - best_d2 <= 4e-12):
+            cand = np.array(tree.query_ball_point(emb[f], math.sqrt(best_d2[f]) + 1e-6))
+            cd2 = sq_dist(emb[f], own[cand])
+            j = np.lexsort((cand, cd2))[0]
+            best[f], best_d2[f] = cand[j], cd2[j]
+    return best, best_d2
 
 
 def fine_labels(
@@ -182,72 +261,43 @@ def fine_labels(
     samples: Mapping[Point, StoredPose],
     label_of: Mapping[Point, int],
     radius: Callable[[np.ndarray], np.ndarray],
+    grid: FineGrid | None = None,
 ) -> FineLabels:
-    """Label every finest-lattice point by its nearest known pose of the same attitude."""
-    cells = lattice.cells(lattice.depth)
-    n_i = (lattice.n_r << lattice.depth) + 1
-    n_a = len(lattice.attitudes)
-    dirs = np.array([lattice.direction(Point(K, J, 0, 0)) for K, J in cells])
-    rho_s = radius(dirs)
-    d = lattice.depth
-    dr = lattice.dr(d)
-    r0 = lattice.grid.r_min
-    r_top = lattice.grid.r_min + lattice.n_r * lattice.grid.dr
-    points: list[Point] = []
-    weights = []
-    pos_ids = []
-    for c, (K, J) in enumerate(cells):
-        omega = lattice.cell_area(K, d)
-        for i in range(n_i):
-            r = r0 + i * dr
-            lo, hi = max(r0, r - dr / 2), min(r_top, r + dr / 2)
-            if hi <= lo:  # a single r level: a shell of one Δr
-                lo, hi = r - lattice.grid.dr / 2, r + lattice.grid.dr / 2
-            vol = omega * ((rho_s[c] + hi) ** 3 - (rho_s[c] + lo) ** 3) / 3
-            for a in range(n_a):
-                points.append(Point(K, J, i, a))
-                weights.append(vol)
-                pos_ids.append(c * n_i + i)
-    labels = np.full(len(points), NON_VIABLE)
+    """Label every finest-lattice point by its nearest known pose of the same attitude
+    (`nearest_known`)."""
+    grid = grid or fine_grid(lattice, radius)
+    n_pos, n_a = len(grid.cells) * grid.n_i, grid.n_a
+    points = [Point(K, J, i, a) for K, J in grid.cells for i in range(grid.n_i)
+              for a in range(n_a)]
+    labels = np.full(n_pos * n_a, NON_VIABLE)
     by_att: dict[int, list[Point]] = {}
     for p in samples:
         by_att.setdefault(p.attitude, []).append(p)
-    fine_by_att: dict[int, list[int]] = {}
-    for idx, p in enumerate(points):
-        fine_by_att.setdefault(p.attitude, []).append(idx)
     for a, known in by_att.items():
         known = sorted(known)
-        tree = cKDTree(_embed(lattice, known))
-        idxs = fine_by_att.get(a, [])
-        _, nearest = tree.query(_embed(lattice, [points[i] for i in idxs]))
-        for idx, k in zip(idxs, nearest, strict=True):
-            labels[idx] = label_of.get(known[int(k)], NON_VIABLE)
-    return FineLabels(points, labels, np.array(weights), np.array(pos_ids))
+        lab = np.array([label_of.get(p, NON_VIABLE) for p in known])
+        labels[a::n_a] = lab[nearest_known(grid, known)[0]]
+    return FineLabels(points, labels, np.repeat(grid.weights, n_a),
+                      np.repeat(np.arange(n_pos), n_a))
 
 
-def volumes(fine: FineLabels, n_labels: int) -> list[float]:
+def exact_volume(grid: FineGrid, positions: Iterable[int]) -> float:
+    """m³ of a set of positions, summed exactly (the running map's sums are the same)."""
+    from graspscape.services.coordinator.manifolds.exact import value
+
+    w = grid.weights_exact
+    return value(sum(w[int(pos)] for pos in positions))
+
+
+def volumes(fine: FineLabels, n_labels: int, grid: FineGrid | None = None) -> list[float]:
     """m³ of reference-point positions per label (a position counts once per label)."""
     out = []
     for label in range(n_labels):
-        mask = fine.labels == label
-        _, first = np.unique(fine.position_ids[mask], return_index=True)
-        out.append(float(fine.weights[mask][first].sum()))
+        positions = np.unique(fine.position_ids[fine.labels == label])
+        if grid is not None:
+            out.append(exact_volume(grid, positions))
+        else:
+            mask = fine.labels == label
+            _, first = np.unique(fine.position_ids[mask], return_index=True)
+            out.append(float(fine.weights[mask][first].sum()))
     return out
-
-
-def describe(samples: list[StoredPose]) -> str:
-    """Which digits touch which part of the object, from the members' contacts."""
-    digit_sets = Counter(s.digits for s in samples)
-    digits = sorted(digit_sets.most_common(1)[0][0]) if digit_sets else []
-    parts = []
-    for d in digits:
-        pts = [s.contacts[d] for s in samples if d in s.contacts]
-        if not pts:
-            continue
-        x, y, z = (sum(p[i] for p in pts) / len(pts) for i in range(3))
-        spread = max(math.dist(p, (x, y, z)) for p in pts)
-        parts.append(
-            f"{d} at ({100 * x:.1f}, {100 * y:.1f}, {100 * z:.1f}) cm ± {100 * spread:.1f} cm"
-        )
-    touched = ", ".join(digits) or "nothing"
-    return f"{touched} touch the object — " + "; ".join(parts)

@@ -27,6 +27,7 @@ import threading
 from bisect import bisect_left, insort
 from collections import deque
 from collections.abc import Hashable, Iterable, Mapping
+from typing import Protocol
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
@@ -41,6 +42,12 @@ Pair = tuple[Point, Point]
 
 def _pair(p: Point, q: Point) -> Pair:
     return (p, q) if p < q else (q, p)
+
+
+class Listener(Protocol):
+    def on_new(self, cid: int, p: Point) -> None: ...
+    def on_join(self, into: int, gone: int, moved: set[Point]) -> None: ...
+    def on_detach(self, old: int, new: int, part: set[Point]) -> None: ...
 
 
 class IncrementalGrouping:
@@ -61,6 +68,9 @@ class IncrementalGrouping:
         self._next_id = 0
         self._speck_nbrs: dict[Point, list[Point]] = {}
         self._speck_near: dict[Pair, bool] = {}
+        # Told of every component change (manifolds/running.py keeps sums per component).
+        self.listener: Listener | None = None
+        self.fold: dict[int, int] = {}  # speck → the component it is folded into (last read)
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -153,6 +163,8 @@ class IncrementalGrouping:
         self._comp_of[p] = cid
         self._members[cid] = {p}
         self._sorted[cid] = [p]
+        if self.listener is not None:
+            self.listener.on_new(cid, p)
 
     def _join(self, p: Point, q: Point) -> None:
         a, b = self._comp_of[p], self._comp_of[q]
@@ -166,6 +178,8 @@ class IncrementalGrouping:
             self._comp_of[x] = a
             insort(into, x)
         self._members[a] |= moved
+        if self.listener is not None:
+            self.listener.on_join(a, b, moved)
 
     def _split(self, p: Point, q: Point) -> None:
         """p and q lost their direct link: search from both in step; if one search runs out
@@ -198,6 +212,8 @@ class IncrementalGrouping:
         self._sorted[cid] = sorted(part)
         for x in part:
             self._comp_of[x] = cid
+        if self.listener is not None:
+            self.listener.on_detach(old, cid, part)
 
     # --- reading ---------------------------------------------------------------------------
     def raw_components(self) -> list[list[Point]]:
@@ -239,9 +255,26 @@ class IncrementalGrouping:
                 near_of[(p, q)] = got
             return got
 
-        out = _merge_specks(self.lattice, self.samples, raw, owner_of, neighbours_of, near)
+        merged: dict[int, int] = {}
+        out = _merge_specks(self.lattice, self.samples, raw, owner_of, neighbours_of, near,
+                            merged)
         self._speck_nbrs, self._speck_near = nbrs, near_of
+        self.fold = {comp_of[raw[i][0]]: comp_of[raw[j][0]] for i, j in merged.items()}
         return out
+
+    def comp_of(self, p: Point) -> int | None:
+        return self._comp_of.get(p)
+
+    def first(self, cid: int) -> Point:
+        """The component's smallest point."""
+        return self._sorted[cid][0]
+
+    def members(self, cid: int) -> list[Point]:
+        """The component's points, sorted (shared: callers must not change it)."""
+        return self._sorted[cid]
+
+    def cids(self) -> Iterable[int]:
+        return self._sorted.keys()
 
 
 class GroupingCache:

@@ -14,13 +14,15 @@ The best grasps (/best and its evidence) are read in manifolds/best.py.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
+from graspscape.services.coordinator.exploration.samples import lattice_of
 from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
@@ -28,15 +30,16 @@ from graspscape.services.coordinator.manifolds.grouping import (
     FineLabels,
     surface_radii,
 )
-from graspscape.services.coordinator.manifolds.incremental import GroupingCache
-from graspscape.services.coordinator.manifolds.robust import (
-    RobustScore,
+from graspscape.services.coordinator.manifolds.live import (
+    MapCache,
+    MapState,
+    fine_labels_of,
+    update_state,
+    write,
 )
-from graspscape.services.coordinator.manifolds.summary import (
-    ManifoldMap,
-    ManifoldSummary,
-    build_map,
-)
+from graspscape.services.coordinator.manifolds.robust import RobustScore
+from graspscape.services.coordinator.manifolds.running import RunningMap
+from graspscape.services.coordinator.manifolds.summary import ManifoldMap, ManifoldSummary
 from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -45,22 +48,20 @@ from graspscape.services.coordinator.store.models import (
     PoseRow,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
-from sqlalchemy import Text, bindparam, cast, delete, select, update
+from sqlalchemy import Text, bindparam, cast, select, update
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
 REFRESH_EVERY_TILES = 10  # the first incremental refresh: at the 10th finished tile
-# Later ones once the stored poses have grown by a quarter since the last refresh: a refresh
-# recomputes the whole map, so refreshing every few tiles made the refreshes' total cost grow
-# with the square of the exploration's size (measured: 53 of the 61 s of coordinator time on
-# the cube at 4 rolls); geometric steps keep it a small multiple of one final refresh.
+# Later ones once the stored poses have grown by a quarter since the last refresh. (A full
+# recompute made refreshing every few tiles cost the square of the exploration's size; a
+# refresh of the running map costs its new poses, see docs/exploration.md.)
 REFRESH_GROWTH = 0.25
 FALLBACK_RADIUS_M = FALLBACK_RADIUS
-_KEY_CHUNK = 500
-# Grouping states of the explorations this process refreshes (the coordinator's, the local
-# runner's): after a restart the first refresh groups the whole map once.
-GROUPINGS = GroupingCache()
+# The running maps of the explorations this process refreshes (the coordinator's, the local
+# runner's): after a restart the first refresh reads the whole map once.
+MAPS = MapCache()
 
 
 def radius_function(mesh: Any | None) -> Any:
@@ -70,37 +71,67 @@ def radius_function(mesh: Any | None) -> Any:
     return radius
 
 
-@dataclass(frozen=True)
 class ComputedMap:
-    spec: ExplorationSpec
-    lattice: Lattice
-    samples: dict[Point, StoredPose]
-    map: ManifoldMap
-    fine: FineLabels
-    label_of: dict[Point, int]
-    mesh: Any | None
+    """The manifold map of the stored poses as of this refresh: the table, and on demand
+    (a pass over the map each) the pose → label assignment, the robust scores by key and
+    the finest lattice's labels. The samples are the running map's own: do not change them,
+    and read the lazy parts before the next refresh of the same exploration."""
+
+    def __init__(self, spec: ExplorationSpec, running: RunningMap, mesh: Any | None) -> None:
+        self.spec = spec
+        self.lattice = running.lattice
+        self.samples = running.samples
+        self.mesh = mesh
+        self._running = running
+        self.manifolds = list(running.table.manifolds)
+
+    @cached_property
+    def label_of(self) -> dict[Point, int]:
+        return self._running.label_of()
+
+    @cached_property
+    def map(self) -> ManifoldMap:
+        table = self._running.table
+        return ManifoldMap(
+            manifolds=self.manifolds,
+            assignment={self.samples[p].key: label for p, label in self.label_of.items()},
+            non_viable_volume_cm3=round(table.non_viable_volume_m3 * 1e6, 3),
+            viable_volume_cm3=round(table.viable_volume_m3 * 1e6, 3),
+            robust={self.samples[p].key: sc for p, sc in self._running.scores.items()},
+        )
+
+    @cached_property
+    def fine(self) -> FineLabels:
+        return fine_labels_of(self._running)
 
 
-def compute_map(
-    session: Session, exploration_id: int, *, samples: dict[Point, StoredPose] | None = None
-) -> ComputedMap:
-    """The manifold map of the stored poses (not stored by this function)."""
+def _state(session: Session, exploration_id: int
+           ) -> tuple[ExplorationRow, MapState, Callable[[], RunningMap]]:
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
     spec = spec_of(row)
     lattice = lattice_of(spec)
-    samples = samples if samples is not None else load_samples(session, exploration_id, lattice)
-    mesh = object_mesh(session, row.object_id)
-    # Grouping from the process's incremental state: only the poses stored since the last
-    # refresh are linked in (manifolds/incremental.py); the rest of the map is recomputed.
+    object_id = row.object_id
+
+    def fresh() -> RunningMap:
+        return RunningMap(lattice, radius_function(object_mesh(session, object_id)),
+                          maxima_per_manifold=spec.refinement.local_search_starts)
+
     key = (str(session.get_bind().url), exploration_id, row.created_at)
-    comps = GROUPINGS.components(key, lattice, samples)
-    mmap, fine, label_of = build_map(
-        lattice, samples, radius_function(mesh),
-        maxima_per_manifold=spec.refinement.local_search_starts, comps=comps,
-    )
-    return ComputedMap(spec, lattice, samples, mmap, fine, label_of, mesh)
+    return row, MAPS.get(key, fresh), fresh
+
+
+def compute_map(
+    session: Session, exploration_id: int, *, samples: dict[Point, StoredPose] | None = None
+) -> ComputedMap:
+    """The manifold map of the stored poses (not stored by this function; what it changed
+    is written by the next refresh). `samples`: ignored (the running map reads the rows
+    stored since its last read itself), kept for callers that have them."""
+    row, state, fresh = _state(session, exploration_id)
+    with state.lock:
+        update_state(session, exploration_id, state, fresh)
+    return ComputedMap(spec_of(row), state.running, object_mesh(session, row.object_id))
 
 
 def refresh_manifolds(
@@ -112,57 +143,20 @@ def refresh_manifolds(
     samples: dict[Point, StoredPose] | None = None,
     final: bool = False,
 ) -> ComputedMap:
-    """Recompute and store the manifolds (rows and pose assignment) and when, on the
-    exploration (`manifolds_poses_done`, `manifolds_final`); caller commits. Returns the map
-    it computed, so that a caller drawing it does not compute it again."""
-    computed = compute_map(session, exploration_id, samples=samples)
-    samples, mmap, label_of = computed.samples, computed.map, computed.label_of
-    exploration = session.get(ExplorationRow, exploration_id)
-    if exploration is not None:
-        exploration.manifolds_poses_done = exploration.poses_done
-        exploration.manifolds_final = final
-    session.execute(
-        update(PoseRow).where(PoseRow.exploration_id == exploration_id)
-        .values(manifold_id=None).execution_options(synchronize_session=False)
-    )
-    session.execute(delete(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id))
-    keys_of: dict[int, list[str]] = {}
-    for p, label in label_of.items():
-        keys_of.setdefault(label, []).append(samples[p].key)
-    # A few statements per refresh, not a few per manifold: a cube map has hundreds.
-    best_keys = sorted({m.best.key for m in mmap.manifolds})
-    signature_of: dict[str, Any] = {}
-    for i in range(0, len(best_keys), _KEY_CHUNK):
-        signature_of.update((key, signature) for key, signature in session.execute(
-            select(PoseRow.pose_key, PoseRow.signature).where(
-                PoseRow.exploration_id == exploration_id,
-                PoseRow.pose_key.in_(best_keys[i : i + _KEY_CHUNK]))))
-    rows = [
-        ManifoldRow(
-            exploration_id=exploration_id, label=m.label, signature=signature_of.get(m.best.key),
-            size=m.pose_count, best_pose_key=m.best.key, best_mu_s=m.best.mu_s,
-            summary=m.model_dump(mode="json"), core_volume_cm3=m.core_volume_cm3,
-            volume_cm3=m.volume_cm3,
-            robust_best_key=m.robust_best.key if m.robust_best else None,
-            robust_best_q=m.robust_best.q if m.robust_best else None, large=m.large,
-        )
-        for m in mmap.manifolds
-    ]
-    session.add_all(rows)
-    session.flush()
-    assignments = [{"m": row.id, "k": key}
-                   for row, m in zip(rows, mmap.manifolds, strict=True)
-                   for key in sorted(keys_of.get(m.label, []))]
-    if assignments:
-        poses = PoseRow.__table__
-        session.connection().execute(
-            poses.update()
-            .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
-            .values(manifold_id=bindparam("m")),
-            assignments,
-        )
-    store_robust_scores(session, exploration_id, mmap.robust)
-    return computed
+    """Bring the stored manifolds (rows, the poses' manifold column and robust scores) up to
+    date with the stored poses, writing what changed (manifolds/live.py), and note when on
+    the exploration (`manifolds_poses_done`, `manifolds_final`); caller commits. Returns the
+    map, so that a caller drawing it does not compute it again."""
+    # The exploration's row first (PostgreSQL: its lock; SQLite: the write lock), then the
+    # running map's: an ingest refreshing holds the row lock already, so the order is the
+    # same everywhere and two refreshes of one exploration cannot deadlock.
+    session.execute(update(ExplorationRow).where(ExplorationRow.id == exploration_id)
+                    .values(manifolds_final=ExplorationRow.manifolds_final))
+    row, state, fresh = _state(session, exploration_id)
+    with state.lock:
+        update_state(session, exploration_id, state, fresh)
+        write(session, exploration_id, state, final=final)
+    return ComputedMap(spec_of(row), state.running, object_mesh(session, row.object_id))
 
 
 def store_robust_scores(session: Session, exploration_id: int,

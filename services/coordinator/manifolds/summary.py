@@ -14,7 +14,6 @@ manifolds that are not large as one dust line (`table_rows_of`).
 
 from __future__ import annotations
 
-import statistics
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -22,11 +21,13 @@ import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.refine import local_maxima
 from graspscape.services.coordinator.exploration.schemas import PoseValues
+from graspscape.services.coordinator.manifolds.aggregate import Stats
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
     FineLabels,
     components,
-    describe,
+    exact_volume,
+    fine_grid,
     fine_labels,
     label_name,
     volumes,
@@ -121,16 +122,38 @@ class ManifoldMap(BaseModel):
     robust: dict[str, RobustScore] = Field(default_factory=dict)  # pose key → score
 
 
-def _position_volume(lattice: Lattice, fine: FineLabels, points: set[Point]) -> float:
-    """m³ of the finest-lattice positions of `points` (a position once, whatever attitudes):
-    the weights `fine_labels` gives them, found by its layout (cells × r indices × attitudes)."""
-    if not points:
-        return 0.0
-    cell = {kj: c for c, kj in enumerate(lattice.cells(lattice.depth))}
-    n_i = (lattice.n_r << lattice.depth) + 1
-    n_a = len(lattice.attitudes)
-    positions = {cell[(p.ring, p.azimuth)] * n_i + p.r_index for p in points}
-    return float(sum(fine.weights[pos * n_a] for pos in positions))
+def summary_of(
+    label: int, stats: Stats, volume_m3: float, best: StoredPose, mu_min: float,
+    maxima: list[StoredPose], core_count: int, core_volume_m3: float,
+    robust_top: tuple[StoredPose, RobustScore], large: bool,
+) -> ManifoldSummary:
+    """A manifold's summary from its sums and extremes (the full recompute's and the running
+    map's, manifolds/running.py: the same fields from the same numbers)."""
+    return ManifoldSummary(
+        label=label,
+        name=label_name(label),
+        description=stats.description(),
+        digits=stats.majority(),
+        pose_count=stats.count,
+        evaluated_count=stats.evaluated,
+        volume_cm3=round(volume_m3 * 1e6, 3),
+        mu_s_min=mu_min,
+        mu_s_mean=stats.mu_mean(),
+        mu_s_max=best.mu_s,
+        mu_s_std=stats.mu_std(),
+        best=PoseBrief.of(best),
+        local_maxima=[PoseBrief.of(m) for m in maxima],
+        core_count=core_count,
+        core_volume_cm3=round(core_volume_m3 * 1e6, 3),
+        robust_best=RobustBrief.of_score(*robust_top),
+        large=large,
+    )
+
+
+def label_order(vols: list[float], first_keys: list[str]) -> list[int]:
+    """Component indices in label order: by volume (largest first), ties by the key of the
+    component's smallest point."""
+    return sorted(range(len(vols)), key=lambda i: (-round(vols[i], 12), first_keys[i]))
 
 
 def build_map(
@@ -141,14 +164,16 @@ def build_map(
     maxima_per_manifold: int = 3,
     comps: list[list[Point]] | None = None,
 ) -> tuple[ManifoldMap, FineLabels, dict[Point, int]]:
-    """`comps`: `grouping.components(lattice, samples)` where the caller keeps it current
-    (manifolds/incremental.py); computed here when not given."""
+    """The whole map computed at once (the running map, manifolds/running.py, keeps the same
+    one up to date batch by batch). `comps`: `grouping.components(lattice, samples)` where
+    the caller has it; computed here when not given."""
     if comps is None:
         comps = components(lattice, samples)
     provisional = {p: i for i, comp in enumerate(comps) for p in comp}
-    fine = fine_labels(lattice, samples, provisional, radius)
-    vols = volumes(fine, len(comps))
-    order = sorted(range(len(comps)), key=lambda i: (-round(vols[i], 12), samples[comps[i][0]].key))
+    grid = fine_grid(lattice, radius)
+    fine = fine_labels(lattice, samples, provisional, radius, grid)
+    vols = volumes(fine, len(comps), grid)
+    order = label_order(vols, [samples[c[0]].key for c in comps])
     relabel = {old: new for new, old in enumerate(order)}
     label_of = {p: relabel[i] for p, i in provisional.items()}
     fine.labels[:] = [relabel[int(x)] if x >= 0 else -1 for x in fine.labels]
@@ -158,9 +183,7 @@ def build_map(
 
     hood = Neighbourhoods(lattice)  # N_δ at the finest step, shared by scores and cores
     scores = robust_scores(lattice, samples, hood=hood)
-    viable_mask = fine.labels >= 0
-    _, first = np.unique(fine.position_ids[viable_mask], return_index=True)
-    viable_volume = float(fine.weights[viable_mask][first].sum())
+    viable_volume = exact_volume(grid, np.unique(fine.position_ids[fine.labels >= 0]))
     large = set(large_manifolds([vols[i] for i in order], viable_volume, LARGE_SHARE))
     out = []
     for old in order:
@@ -168,42 +191,18 @@ def build_map(
         ss = [samples[p] for p in members]
         core = robust_core(lattice, samples, members, hood=hood)
         top = min(members, key=lambda p: robust_order(samples[p], scores[p]))
-        mus = [s.mu_s for s in ss]
-        best = min(ss, key=lambda s: (-s.mu_s, s.key))
         maxima = local_maxima(lattice, members, lookup, top=maxima_per_manifold)
-        digit_count: dict[frozenset[str], int] = {}
-        for s in ss:
-            digit_count[s.digits] = digit_count.get(s.digits, 0) + 1
-        digits = sorted(max(digit_count.items(), key=lambda kv: (kv[1], sorted(kv[0])))[0])
         label = relabel[old]
-        out.append(
-            ManifoldSummary(
-                label=label,
-                name=label_name(label),
-                description=describe(ss),
-                digits=digits,
-                pose_count=len(ss),
-                evaluated_count=sum(1 for s in ss if s.source == "evaluated"),
-                volume_cm3=round(vols[old] * 1e6, 3),
-                mu_s_min=min(mus),
-                mu_s_mean=statistics.fmean(mus),
-                mu_s_max=max(mus),
-                mu_s_std=statistics.pstdev(mus),
-                best=PoseBrief.of(best),
-                local_maxima=[PoseBrief.of(samples[p]) for p in maxima],
-                core_count=len(core),
-                core_volume_cm3=round(_position_volume(lattice, fine, core) * 1e6, 3),
-                robust_best=RobustBrief.of_score(samples[top], scores[top]),
-                large=label in large,
-            )
-        )
-    mask = fine.labels < 0
-    _, first = np.unique(fine.position_ids[mask], return_index=True)
-    non_viable = float(fine.weights[mask][first].sum()) * 1e6
+        out.append(summary_of(
+            label, Stats.of(ss), vols[old], min(ss, key=lambda s: (-s.mu_s, s.key)),
+            min(s.mu_s for s in ss), [samples[p] for p in maxima], len(core),
+            exact_volume(grid, {grid.position(p) for p in core}),
+            (samples[top], scores[top]), label in large))
+    non_viable = exact_volume(grid, np.unique(fine.position_ids[fine.labels < 0]))
     result = ManifoldMap(
         manifolds=out,
         assignment={samples[p].key: label for p, label in label_of.items()},
-        non_viable_volume_cm3=round(non_viable, 3),
+        non_viable_volume_cm3=round(non_viable * 1e6, 3),
         viable_volume_cm3=round(viable_volume * 1e6, 3),
         robust={samples[p].key: sc for p, sc in scores.items()},
     )

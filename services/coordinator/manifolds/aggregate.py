@@ -1,0 +1,182 @@
+"""What a manifold's summary says of its members, as sums that can be added to and taken
+from (pure): counts, exact sums of μs and its square, the grasp types counted, and per digit
+the exact sums of its contact centroids and their squared norms.
+
+`Stats` is what the full recompute (summary.build_map) adds up member by member and what the
+running map (manifolds/running.py) keeps per component, merging two when they join and
+taking a part away when a cut splits one; both read the summary's numbers through the same
+functions here, so both give the same table to the last bit (manifolds/exact.py).
+
+The description names the most common grasp type's digits (ties: the larger count, then the
+sorted digits, as the summary's `digits`) and where each touches the object: the mean of
+the members' contact centroids ± their RMS distance from it (kept as sums; the largest
+distance it showed before issue 21 cannot be kept up to date without revisiting members).
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
+
+from graspscape.services.coordinator.exploration.lattice import Point
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.exact import ONE, exact, pstdev, sqrt_of, value
+
+
+@dataclass
+class DigitSums:
+    n: int = 0
+    xyz: list[int] = field(default_factory=lambda: [0, 0, 0])  # exact Σ of each coordinate
+    sq: int = 0  # exact Σ of x² + y² + z² (scale 2^(2·SCALE))
+
+    def add(self, point: tuple[float, float, float], sign: int) -> None:
+        e = [exact(c) for c in point]
+        self.n += sign
+        for i in range(3):
+            self.xyz[i] += sign * e[i]
+        self.sq += sign * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+
+
+@dataclass
+class Stats:
+    """The members' sums (see the module docstring)."""
+
+    count: int = 0
+    evaluated: int = 0
+    mu1: int = 0  # exact Σ μs
+    mu2: int = 0  # exact Σ μs²
+    kinds: Counter[frozenset[str]] = field(default_factory=Counter)
+    digits: dict[str, DigitSums] = field(default_factory=dict)
+
+    def add(self, s: StoredPose, sign: int = 1) -> None:
+        e = exact(s.mu_s)
+        self.count += sign
+        self.evaluated += sign * (s.source == "evaluated")
+        self.mu1 += sign * e
+        self.mu2 += sign * e * e
+        self.kinds[s.digits] += sign
+        if not self.kinds[s.digits]:
+            del self.kinds[s.digits]
+        for d, point in s.contacts.items():
+            sums = self.digits.get(d)
+            if sums is None:
+                sums = self.digits[d] = DigitSums()
+            sums.add(point, sign)
+            if not sums.n:
+                del self.digits[d]
+
+    def merge(self, other: Stats, sign: int = 1) -> None:
+        """Add (sign 1) or take away (-1) another component's sums."""
+        self.count += sign * other.count
+        self.evaluated += sign * other.evaluated
+        self.mu1 += sign * other.mu1
+        self.mu2 += sign * other.mu2
+        for kind, n in other.kinds.items():
+            self.kinds[kind] += sign * n
+            if not self.kinds[kind]:
+                del self.kinds[kind]
+        for d, o in other.digits.items():
+            mine = self.digits.setdefault(d, DigitSums())
+            mine.n += sign * o.n
+            mine.xyz = [a + sign * b for a, b in zip(mine.xyz, o.xyz, strict=True)]
+            mine.sq += sign * o.sq
+            if not mine.n:
+                del self.digits[d]
+
+    @staticmethod
+    def of(members: Iterable[StoredPose]) -> Stats:
+        out = Stats()
+        for s in members:
+            out.add(s)
+        return out
+
+    # --- the summary's numbers ---------------------------------------------------------------
+    def mu_mean(self) -> float:
+        return value(self.mu1) / self.count  # statistics.fmean: fsum / n
+
+    def mu_std(self) -> float:
+        return pstdev(self.count, self.mu1, self.mu2)
+
+    def majority(self) -> list[str]:
+        """The most common grasp type's digits, sorted (ties: the sorted digits)."""
+        if not self.kinds:
+            return []
+        return sorted(max(self.kinds.items(), key=lambda kv: (kv[1], sorted(kv[0])))[0])
+
+    def description(self) -> str:
+        digits = self.majority()
+        parts = []
+        for d in digits:
+            sums = self.digits.get(d)
+            if sums is None:
+                continue
+            x, y, z = (value(c, sums.n) for c in sums.xyz)
+            # RMS distance from the mean: Σ|p|²/n − |mean|², exactly.
+            mean_sq = sum(Fraction(c, ONE) ** 2 for c in sums.xyz) / (sums.n * sums.n)
+            spread = sqrt_of(Fraction(sums.sq, ONE * ONE) / sums.n - mean_sq)
+            parts.append(f"{d} at ({100 * x:.1f}, {100 * y:.1f}, {100 * z:.1f}) cm "
+                         f"± {100 * spread:.1f} cm")
+        touched = ", ".join(digits) or "nothing"
+        return f"{touched} touch the object — " + "; ".join(parts)
+
+
+class PosSet:
+    """Positions with how many points reach each, and the exact m³ of the distinct ones."""
+
+    __slots__ = ("count", "total")
+
+    def __init__(self) -> None:
+        self.count: dict[int, int] = {}
+        self.total = 0
+
+    def add(self, pos: int, w: list[int], n: int = 1) -> None:
+        c = self.count.get(pos, 0)
+        if not c:
+            self.total += w[pos]
+        self.count[pos] = c + n
+
+    def remove(self, pos: int, w: list[int], n: int = 1) -> None:
+        c = self.count[pos] - n
+        if c:
+            self.count[pos] = c
+        else:
+            del self.count[pos]
+            self.total -= w[pos]
+
+    def merge(self, other: PosSet, w: list[int], sign: int) -> None:
+        for pos, n in other.count.items():
+            (self.add if sign > 0 else self.remove)(pos, w, n)
+
+
+@dataclass
+class Comp:
+    """One component's sums and heaps (stale heap entries are skipped when read)."""
+
+    stats: Stats = field(default_factory=Stats)
+    own: PosSet = field(default_factory=PosSet)  # positions of the points its poses own
+    core: PosSet = field(default_factory=PosSet)  # positions of its robust-core poses
+    core_count: int = 0
+    best: list[tuple[float, str, Point]] = field(default_factory=list)  # (-μs, key, p)
+    low: list[tuple[float, str, Point]] = field(default_factory=list)  # (μs, key, p)
+    robust: list[tuple[Any, Point]] = field(default_factory=list)  # (robust_order, p)
+    maxima: list[tuple[float, Point]] = field(default_factory=list)  # (-μs, p)
+
+
+def top(heap: list[Any], ok: Callable[[Any], bool], k: int = 1) -> list[Any]:
+    """The k best valid entries of one of a component's heaps, one per pose (stale and
+    repeated entries are dropped on the way)."""
+    out: list[Any] = []
+    seen: set[Point] = set()
+    while heap and len(out) < k:
+        entry = heapq.heappop(heap)
+        p = entry[-1]
+        if p not in seen and ok(entry):
+            seen.add(p)
+            out.append(entry)
+    for entry in out:
+        heapq.heappush(heap, entry)
+    return out

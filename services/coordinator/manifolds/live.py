@@ -1,0 +1,253 @@
+"""The running maps of the explorations this process refreshes, and what a refresh writes.
+
+Each exploration's `RunningMap` (manifolds/running.py) is kept per process (key: database,
+exploration id, creation time; the 8 most recently used) with the largest pose row id it has
+read: a refresh reads only the rows stored since (`_new_rows`), feeds them in, and writes
+only what changed: the manifold rows whose summary or label changed (rows are kept per main
+component, so a manifold keeps its row while it grows), the manifold column of the poses
+whose manifold may have changed, and the robust scores that changed. What a compute without
+a write changed is kept until the next write.
+
+The state trusts the store only as far as it can check it: the rows read must be as many as
+the exploration's `poses_done` (read after them: a row committed out of id order, or a rolled
+back ingest, shows as a difference), and the table must be as this state last wrote it (the
+exploration's refresh mark and the set of manifold row ids); otherwise the map is read again
+from every row, or written again whole. After a restart the first refresh reads everything.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.exploration.samples import _SAMPLE_COLUMNS, point_or_none
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.running import RunningMap
+from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow, PoseRow
+from graspscape.shared.specs.pose import Pose
+from sqlalchemy import bindparam, delete, select, update
+from sqlalchemy.orm import Session
+
+_KEY_CHUNK = 500
+
+
+@dataclass
+class MapState:
+    running: RunningMap
+    last_id: int = 0  # the largest pose row id read
+    rows: int = 0  # pose rows read (on the lattice or not)
+    # What the last write left in the store: the refresh mark and main component → row id
+    # with the summary written; None: not written by this state (write it whole).
+    mark: tuple[int, bool] | None = None
+    rows_of: dict[int, tuple[int, ManifoldSummary]] = field(default_factory=dict)
+    dirty: set[Point] = field(default_factory=set)  # manifold may have changed since
+    rescored: set[Point] = field(default_factory=set)  # robust score changed since
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+class MapCache:
+    """Running maps by key, the least recently used dropped beyond `size`."""
+
+    def __init__(self, size: int = 8) -> None:
+        self.size = size
+        self._states: dict[Hashable, MapState] = {}
+        self._lock = threading.Lock()
+
+    def get(self, key: Hashable, make: Callable[[], RunningMap]) -> MapState:
+        with self._lock:
+            state = self._states.pop(key, None)
+            if state is None:
+                state = MapState(make())
+            self._states[key] = state
+            while len(self._states) > self.size:
+                del self._states[next(iter(self._states))]
+            return state
+
+    def drop(self, key: Hashable) -> None:
+        with self._lock:
+            self._states.pop(key, None)
+
+    def clear(self) -> None:
+        with self._lock:
+            self._states.clear()
+
+
+def _new_rows(session: Session, exploration_id: int, lattice: Lattice,
+              after_id: int) -> tuple[dict[Point, StoredPose], int, int]:
+    """The samples of the pose rows with id > after_id: (by point, rows read, largest id)."""
+    out: dict[Point, StoredPose] = {}
+    rows = 0
+    last = after_id
+    query = (select(*_SAMPLE_COLUMNS, PoseRow.id)
+             .where(PoseRow.exploration_id == exploration_id, PoseRow.id > after_id))
+    for row in session.execute(query):
+        rows += 1
+        last = max(last, row.id)
+        p = point_or_none(lattice, Pose(theta=row.theta, phi=row.phi, r=row.r, roll=row.roll,
+                                        pitch=row.pitch, yaw=row.yaw))
+        if p is not None:
+            out[p] = StoredPose.from_row(row)
+    return out, rows, last
+
+
+def update_state(session: Session, exploration_id: int, state: MapState,
+                 fresh: Callable[[], RunningMap]) -> MapState:
+    """Feed the state the rows stored since it last read; start again from every row when
+    the count does not add up (see the module docstring)."""
+    lattice = state.running.lattice
+    for attempt in range(2):
+        batch, rows, last = _new_rows(session, exploration_id, lattice, state.last_id)
+        done = session.scalar(select(ExplorationRow.poses_done)
+                              .where(ExplorationRow.id == exploration_id)) or 0
+        if state.rows + rows == done or attempt:
+            break
+        state.running, state.last_id, state.rows, state.mark = fresh(), 0, 0, None
+        state.rows_of, state.dirty, state.rescored = {}, set(), set()
+    try:
+        dirty = state.running.add(batch)
+    except ValueError:  # a stored result changed: read everything again
+        state.running, state.mark, state.rows_of = fresh(), None, {}
+        batch, rows, last = _new_rows(session, exploration_id, lattice, 0)
+        state.rows = 0
+        dirty = state.running.add(batch)
+    state.last_id, state.rows = last, state.rows + rows
+    state.dirty |= dirty
+    state.rescored |= state.running.rescored
+    return state
+
+
+def _in_sync(session: Session, exploration_id: int, state: MapState) -> bool:
+    if state.mark is None:
+        return False
+    mark = session.execute(select(ExplorationRow.manifolds_poses_done,
+                                  ExplorationRow.manifolds_final)
+                           .where(ExplorationRow.id == exploration_id)).one()
+    ids = set(session.scalars(select(ManifoldRow.id)
+                              .where(ManifoldRow.exploration_id == exploration_id)))
+    return (mark[0], bool(mark[1])) == state.mark and ids == {
+        row for row, _ in state.rows_of.values()}
+
+
+def write(session: Session, exploration_id: int, state: MapState, *, final: bool) -> None:
+    """Store the state's table: only what changed when the store is as this state left it,
+    else all of it. Sets the exploration's refresh mark; the caller commits."""
+    exploration = session.get(ExplorationRow, exploration_id)
+    assert exploration is not None
+    running = state.running
+    whole = not _in_sync(session, exploration_id, state)
+    if whole:
+        session.execute(update(PoseRow).where(PoseRow.exploration_id == exploration_id)
+                        .values(manifold_id=None).execution_options(synchronize_session=False))
+        session.execute(delete(ManifoldRow).where(ManifoldRow.exploration_id == exploration_id))
+        state.rows_of = {}
+    table = running.table
+    keep = {main: row for main, (row, _) in state.rows_of.items()}
+    wanted = dict(zip(table.mains, table.manifolds, strict=True))
+    changed = [(main, m) for main, m in wanted.items()
+               if main in keep and state.rows_of[main][1] != m]
+    gone = [row for main, row in keep.items() if main not in wanted]
+    manifolds = ManifoldRow.__table__
+    moving = gone + [keep[main] for main, m in changed
+                     if state.rows_of[main][1].label != m.label]
+    if moving:  # out of the way of the labels being written ((exploration, label) is unique)
+        session.connection().execute(
+            manifolds.update().where(manifolds.c.id == bindparam("i"))
+            .values(label=bindparam("v_label")), [{"i": i, "v_label": -i - 1} for i in moving])
+    signature_of = _signatures(session, exploration_id,
+                               {m.best.key for main, m in wanted.items()
+                                if main not in keep or state.rows_of[main][1].best != m.best})
+    added = [(main, m) for main, m in wanted.items() if main not in keep]
+    rows = [ManifoldRow(exploration_id=exploration_id, **_columns(m, signature_of))
+            for _, m in added]
+    session.add_all(rows)
+    session.flush()
+    for (main, _), row in zip(added, rows, strict=True):
+        keep[main] = row.id
+    if changed:
+        session.connection().execute(
+            manifolds.update().where(manifolds.c.id == bindparam("i")).values(
+                {k: bindparam("v_" + k) for k in _columns(changed[0][1], signature_of,
+                                                          with_signature=False)}),
+            [{"i": keep[main], **{"v_" + k: v for k, v in _columns(
+                m, signature_of, with_signature=False).items()}} for main, m in changed])
+        resigned = [{"i": keep[main], "v_signature": signature_of[m.best.key]}
+                    for main, m in changed if m.best.key in signature_of]
+        if resigned:
+            session.connection().execute(
+                manifolds.update().where(manifolds.c.id == bindparam("i"))
+                .values(signature=bindparam("v_signature")), resigned)
+    points = (p for p, s in running.samples.items() if s.viable) if whole else sorted(
+        p for p in state.dirty if running.samples[p].viable)
+    assignments = [{"m": keep[running.final(p)], "k": running.samples[p].key}  # type: ignore[index]
+                   for p in points]
+    poses = PoseRow.__table__
+    if assignments:
+        session.connection().execute(
+            poses.update()
+            .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
+            .values(manifold_id=bindparam("m")), assignments)
+    if gone:
+        session.execute(delete(ManifoldRow).where(ManifoldRow.id.in_(gone)))
+    rescored = running.scores.keys() if whole else state.rescored
+    scores = [{"k": running.samples[p].key, "s": sc.s, "q": sc.q, "l": sc.label.value}
+              for p in sorted(rescored) if (sc := running.scores.get(p)) is not None]
+    if scores:
+        session.connection().execute(
+            poses.update()
+            .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
+            .values(robust_s=bindparam("s"), robust_q=bindparam("q"),
+                    robust_label=bindparam("l")), scores)
+    exploration.manifolds_poses_done = exploration.poses_done
+    exploration.manifolds_final = final
+    session.flush()
+    state.rows_of = {main: (keep[main], m) for main, m in wanted.items()}
+    state.mark = (exploration.poses_done, final)
+    state.dirty, state.rescored = set(), set()
+
+
+def _signatures(session: Session, exploration_id: int, keys: set[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    wanted = sorted(keys)
+    for i in range(0, len(wanted), _KEY_CHUNK):
+        out.update((key, signature) for key, signature in session.execute(
+            select(PoseRow.pose_key, PoseRow.signature).where(
+                PoseRow.exploration_id == exploration_id,
+                PoseRow.pose_key.in_(wanted[i : i + _KEY_CHUNK]))))
+    return out
+
+
+def _columns(m: ManifoldSummary, signature_of: dict[str, Any], *,
+             with_signature: bool = True) -> dict[str, Any]:
+    out = {
+        "label": m.label, "size": m.pose_count, "best_pose_key": m.best.key,
+        "best_mu_s": m.best.mu_s, "summary": m.model_dump(mode="json"),
+        "core_volume_cm3": m.core_volume_cm3, "volume_cm3": m.volume_cm3,
+        "robust_best_key": m.robust_best.key if m.robust_best else None,
+        "robust_best_q": m.robust_best.q if m.robust_best else None, "large": m.large,
+    }
+    if with_signature:
+        out["signature"] = signature_of.get(m.best.key)
+    return out
+
+
+def fine_labels_of(running: RunningMap) -> Any:
+    """The running map's finest-lattice labels (grouping.FineLabels), by label."""
+    from graspscape.services.coordinator.manifolds.grouping import NON_VIABLE, FineLabels
+
+    grid = running.grid
+    n_a = grid.n_a
+    label = {main: i for i, main in enumerate(running.table.mains)}
+    labels = np.full(len(running._owner), NON_VIABLE)
+    for f, owner in enumerate(running._owner):
+        if owner is not None and running.samples[owner].viable:
+            labels[f] = label[running.final(owner)]  # type: ignore[index]
+    points = [Point(K, J, i, a) for K, J in grid.cells for i in range(grid.n_i)
+              for a in range(n_a)]
+    n_pos = len(grid.weights)
+    return FineLabels(points, labels, np.repeat(grid.weights, n_a),
+                      np.repeat(np.arange(n_pos), n_a))
