@@ -87,7 +87,8 @@ def _fraction_rows(labels: dict[str, dict[str, float | None]], with_paper: bool)
     out = []
     for label, fr in labels.items():
         paper = PAPER_T3.get(label) if with_paper else None
-        cells = " | ".join(_pct(fr[k]) for k in ("quality", "grasps", "misses", "time"))
+        cells = " | ".join(f"{_pct(fr[k])} ({_pct(fr.get(f'{k}_median'))})"
+                           for k in ("quality", "grasps", "misses", "time"))
         out.append(f"| {label} | {cells} | "
                    + (" / ".join(_pct(v) for v in paper) if paper else "—") + " |")
     return out
@@ -102,12 +103,14 @@ def table3(rows: dict[str, Any]) -> list[str]:
     fr = rows["table3_fractions"]
     head = ["| explorer | quality | # of grasps | misses | time | paper quality / grasps / "
             "misses / time |", "|---|---|---|---|---|---|"]
+    note = ("Each cell: the sum over the objects divided by PPO's (mean of its seeds) sum, "
+            "and in brackets the median of the per-object fractions.")
     out = ["#### Table 3 at matched evaluations: each explorer as a fraction of PPO with the "
-           "same number of evaluations (mean over objects)", "", *head,
+           "same number of evaluations", "", note, "", *head,
            *_fraction_rows(fr["matched"], with_paper=False), "",
            "#### Table 3 in the paper's layout: every adaptive run against PPO with adaptive at "
            f"{max(int(k) for k in next(iter(rows['table3'].values()))['matched'])} rolls' "
-           "evaluations (mean over objects)", "", *head,
+           "evaluations", "", note, "", *head,
            *_fraction_rows(fr["paper_layout"], with_paper=True), "",
            "#### Table 3, absolute (per object): best μs / grasps / misses / time s", "",
            "| object | rolls k | E_k | adaptive | PPO mean ± sd (seeds) | CMA-ES | random | "
