@@ -35,6 +35,11 @@ def shoot_atlas(page: Any, site: Path, folder: str, out: Path) -> Path:
     page.goto((site / folder / "index.html").resolve().as_uri())
     page.wait_for_load_state("load")
     page.locator("#view3d[data-ready='1']").wait_for()
+    # The grasp pictures load lazily, on scrolling: a full-page picture wants them all.
+    page.evaluate("""() => Promise.all([...document.images].map((img) => {
+        img.loading = "eager";
+        return img.complete ? null : new Promise((done) => { img.onload = img.onerror = done; });
+    }))""")
     page.screenshot(path=out / "viewer-atlas.png", full_page=True)
     return out / "viewer-atlas.png"
 
