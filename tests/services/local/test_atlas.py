@@ -4,6 +4,7 @@ whose static site opens from disk, run twice: the second run explores nothing.""
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import shutil
@@ -27,6 +28,7 @@ from graspscape.shared.specs.object_names import BUILTIN_NAMES, ycb_root
 from sqlalchemy.orm import Session
 
 from tests import object_meshes as meshes
+from tests.services.local.test_atlas_site import read_data
 
 
 def test_objects_are_the_builtins_ycb_folders_and_mesh_files(
@@ -85,6 +87,13 @@ def test_two_objects_tiny_grid_site_from_disk(tmp_path: Path) -> None:
             assert (tmp_path / "site" / o["folder"] / name).stat().st_size > 0
         lines = (tmp_path / "site" / o["folder"] / "poses.csv").read_text().splitlines()
         assert len(lines) == o["poses"] + 1
+        # The 3D view's data: the real mesh as exported and every viable direction.
+        data = read_data(tmp_path / "site" / o["folder"] / "view3d-data.js")
+        assert data["obj"] == (tmp_path / "site" / o["folder"] / "object.obj").read_text()
+        viable = sum(row["viable"] == "True" for row in csv.DictReader(lines))
+        assert data["directions"]["total_viable"] == viable
+        assert 'src="../atlas3d.js"' in page
+    assert (tmp_path / "site" / "atlas3d.js").stat().st_size > 100_000
     # Links are relative: the site works from any folder (moved here, nothing breaks).
     moved = tmp_path / "moved"
     shutil.copytree(tmp_path / "site", moved)
