@@ -247,8 +247,8 @@ class Evaluator:
         settle_steps = round(spec.settle_s / dt)
         for _ in range(settle_steps):
             scene.step()
-        # Step counts are kept in locals and stored once: a pydantic attribute costs
-        # microseconds, and this loop's Python is what stands between it and the engine's.
+        # Step counts are kept in locals and stored once: setting a pydantic attribute
+        # costs microseconds, a per-step cost outside the engine (issue 21 item 5).
         phases.trajectory_steps += settle_steps
         # Slip is measured from where the object came to rest in the hand, not from where
         # the fixture held it: released, an enveloped object is drawn into the palm by the
