@@ -47,7 +47,14 @@ class ZenohSettings(BaseModel):
     connect: list[str] = Field(
         default=[], description="zenoh router endpoints to connect to (multi-host deployment)"
     )
-    handler_threads: int = Field(default=4, ge=1, le=64, description="threads serving queries")
+    handler_threads: int = Field(
+        default=4, ge=1, le=64, description="threads storing result batches (ingest)"
+    )
+    lease_threads: int = Field(
+        default=2, ge=1, le=64,
+        description="threads serving lease and object queries, apart from ingest so that a "
+        "lease never waits behind a batch's commit",
+    )
     max_tiles_per_request: int = Field(default=8, ge=1, le=64)
     orphan_grace_s: float = Field(
         default=10.0,

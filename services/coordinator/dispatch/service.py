@@ -1,8 +1,12 @@
 """The Dispatcher: one zenoh session in the coordinator, serving workers from the store.
 
-Zenoh callbacks only enqueue (a full queue is answered "unavailable" at once); a pool of
-handler threads does the database work and replies inside the query's context (`with query`),
-so the final reply goes out as soon as the answer is complete (the store work of each answer
+Zenoh callbacks only enqueue (a full queue is answered "unavailable" at once); pools of
+handler threads do the database work and reply inside the query's context (`with query`),
+so the final reply goes out as soon as the answer is complete. Two pools, two queues: result
+batches (ingest: a transaction that waits its turn at the exploration's row lock) and leases
+with object fetches (one short transaction each), so a lease never queues behind a batch's
+commit; leasing stays safe against the ingest threads and other coordinators by the store's
+own means (SKIP LOCKED, lease epochs, lease-owner checks) (the store work of each answer
 is dispatch/answers.py's). Nothing raised while serving a
 query escapes: bad input gets an error reply, store failures an "unavailable" reply the
 worker retries, and both are logged and counted.
@@ -58,7 +62,12 @@ class Dispatcher:
         self.sessions = sessions
         self.counters = DispatchCounters(registry)
         self.contexts = WorkContexts()
-        self._work: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
+        # kind -> its pool's queue: result batches apart from leases and object fetches.
+        ingest: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
+        leases: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
+        self._queues: dict[str, queue.Queue[Any]] = {
+            "results": ingest, "lease": leases, "object": leases}
+        self._pools: list[tuple[queue.Queue[Any], list[threading.Thread]]] = []
         self._lost_keys: queue.SimpleQueue[str | None] = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
         self._session: zenoh.Session | None = None
@@ -143,10 +152,15 @@ class Dispatcher:
             )
         )
         self._session = session
-        for _ in range(self.zenoh_settings.handler_threads):
-            thread = threading.Thread(target=self._serve, name="dispatch", daemon=True)
-            thread.start()
-            self._threads.append(thread)
+        for name, work, count in (
+            ("dispatch-ingest", self._queues["results"], self.zenoh_settings.handler_threads),
+            ("dispatch-lease", self._queues["lease"], self.zenoh_settings.lease_threads),
+        ):
+            pool = [threading.Thread(target=self._serve, args=(work,), name=name, daemon=True)
+                    for _ in range(count)]
+            for thread in pool:
+                thread.start()
+            self._pools.append((work, pool))
         watcher = threading.Thread(target=self._watch_lost, name="dispatch-lost", daemon=True)
         watcher.start()
         self._threads.append(watcher)
@@ -179,14 +193,15 @@ class Dispatcher:
             except Exception:  # already gone with a closing session
                 log.debug("undeclare failed", exc_info=True)
         self._declared = []
-        for _ in list(self._threads):
-            try:
-                self._work.put(_STOP, timeout=1)
-            except queue.Full:
-                break
-        for thread in list(self._threads):
+        for work, pool in self._pools:
+            for _ in pool:
+                try:
+                    work.put(_STOP, timeout=1)
+                except queue.Full:
+                    break
+        for thread in [*self._threads, *(t for _, pool in self._pools for t in pool)]:
             thread.join(timeout=5)
-        self._threads = []
+        self._threads, self._pools = [], []
         if self._session is not None:
             self._session.close()
             self._session = None
@@ -197,9 +212,11 @@ class Dispatcher:
     # -- callbacks: enqueue only -----------------------------------------------------------
 
     def _enqueue(self, kind: str):
+        work = self._queues[kind]
+
         def callback(query: zenoh.Query) -> None:
             try:
-                self._work.put_nowait((kind, query))
+                work.put_nowait((kind, query))
             except queue.Full:
                 self.counters.errors.labels(kind, "busy").inc()
                 with query:
@@ -220,9 +237,9 @@ class Dispatcher:
 
     # -- handler threads -------------------------------------------------------------------
 
-    def _serve(self) -> None:
+    def _serve(self, work: queue.Queue[Any]) -> None:
         while True:
-            item = self._work.get()
+            item = work.get()
             if item is _STOP:
                 return
             kind, payload = item
