@@ -1,23 +1,24 @@
-"""A manifold refresh's cost against the map's size, grouping full vs incremental (issue 21
-item 2).
+"""A manifold refresh's cost against the map's size: the full recompute against the running
+map (manifolds/running.py), issue 21 item 2.
 
-Maps: every finest point of a real lattice (Δθ 10° refined once, r 0–5 cm by 1 cm, 1/2/4
-rolls) with a synthetic behaviour field (regions cut by planes through the direction sphere,
-joint angles that drift across a region with noise, 15 % failures), sampled as refinement
-leaves it: the whole coarse pass and half of the finer points. For each map: the full
-recompute `grouping.components` (what each refresh ran before), and the incremental state
-fed the whole map in shuffled tiles of TILE poses, then timed on the last few tiles:
-`add(tile)` + `components()` (what a refresh runs now). `build_map` with the grouping given
-is timed too: fine labels, volumes, robust scores and summaries still look at every pose.
+Maps: every finest point of a real lattice (Δθ 10° or 9° refined once, r 0–5 cm by 1 cm,
+1/4/8 rolls: ~10k/41k/101k poses, `--maps`) with a synthetic behaviour field (regions cut by
+planes through the direction sphere, joint angles that drift across a region with noise, 15
+% failures, contact centroids), sampled as refinement leaves it: the whole coarse pass and
+half of the finer points. For each map: the full recompute, `grouping.components` +
+`summary.build_map` (before: a refresh grouped incrementally but ran build_map over every
+pose), and the running map fed the map in shuffled order, then timed on the last TILES tiles
+of TILE poses: `RunningMap.add(tile)` (after: what a refresh computes now). The running
+table is checked against build_map's, field by field.
 
-`--store` measures `refresh_manifolds` itself on SQLite: an exploration of the grid strategy
-(Δθ 10°, r 0–5 cm, 4 rolls, no refinement; `tests.factories.oracle_result`'s results, 3
-contacts and 9 joints each) stored tile by tile through the real ingest (`lease_tiles` +
-`ingest_results`); at each checkpoint the refresh after one more tile is timed with the
-grouping state kept since the tile before (now) and again with it dropped (the full grouping,
-as before), over the same stored poses.
+`--store` measures `refresh_manifolds` itself on SQLite: a grid exploration of the sphere
+(Δθ 0.056 rad, r 0–5 cm, 4 rolls: ~100k poses; `tests.factories.oracle_result`'s results)
+stored tile by tile through the real ingest (`lease_tiles` + `ingest_results`); at ~10k,
+~50k and ~100k poses the refresh after one more tile is timed with the running map kept
+since the tile before (after) and cold (the process's maps dropped: every row read, the map
+computed and written whole, as every refresh did before; up to --store-cold-up-to poses).
 
-Run: python -m benchmarks.bench_incremental_manifolds [--rolls 1,2,4] [--tiles 5] [--store]
+Run: python -m benchmarks.bench_incremental_manifolds [--maps 10:1,10:4,9:8] [--tiles 8] [--store]
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import time
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import components
-from graspscape.services.coordinator.manifolds.incremental import IncrementalGrouping
+from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.service import radius_function
 from graspscape.services.coordinator.manifolds.summary import build_map
 from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
@@ -68,52 +69,56 @@ def synthetic_map(lattice: Lattice, rng: random.Random) -> dict[Point, StoredPos
                     outcome="held" if viable else "dropped",
                     mu_s=rng.random() if viable else 0.0,
                     digits=kind if viable else frozenset(),
+                    contacts={g: (0.03 * d[0] + rng.gauss(0, 0.005), 0.03 * d[1],
+                                  0.03 * d[2] + 0.01 * k) for k, g in enumerate(sorted(kind))}
+                    if viable else {},
                     joints={f"{g}_1": drift + 0.1 * k for k, g in enumerate(sorted(kind))}
                     if viable else {},
                 )
     return out
 
 
-def measure(rolls: int, tiles: int) -> dict[str, float]:
-    grid = PoseGridSpec(dtheta=math.radians(10), r_min=0.0, r_max=0.05, dr=0.01,
+def measure(dtheta_deg: float, rolls: int, tiles: int) -> dict[str, float]:
+    grid = PoseGridSpec(dtheta=math.radians(dtheta_deg), r_min=0.0, r_max=0.05, dr=0.01,
                         attitudes=AttitudeSpec(rolls=rolls))  # type: ignore[arg-type]
     lattice = Lattice(grid, 1)
     rng = random.Random(rolls)
     samples = synthetic_map(lattice, rng)
+    n = len(samples)
+    radius = radius_function(None)
+    t = time.process_time()
+    comps = components(lattice, samples)
+    grouping_s = time.process_time() - t
+    t = time.process_time()
+    full, _, _ = build_map(lattice, samples, radius, comps=comps)
+    build_s = time.process_time() - t
+
     order = sorted(samples)
     rng.shuffle(order)
+    head = n - tiles * TILE
     t = time.process_time()
-    full = components(lattice, samples)
-    full_s = time.process_time() - t
-
-    state = IncrementalGrouping(lattice)
-    head = len(order) - tiles * TILE
-    t = time.process_time()
-    for i in range(0, head, TILE):
-        state.add((p, samples[p]) for p in order[i : min(i + TILE, head)])
-    state.components()
+    running = RunningMap(lattice, radius)
+    running.add({p: samples[p] for p in order[:head]})
     feed_s = time.process_time() - t
     per_tile = []
-    for i in range(head, len(order), TILE):
+    for i in range(head, n, TILE):
         t = time.process_time()
-        state.add((p, samples[p]) for p in order[i : i + TILE])
-        comps = state.components()
+        running.add({p: samples[p] for p in order[i : i + TILE]})
         per_tile.append(time.process_time() - t)
-    assert comps == full, "incremental grouping differs from the full recompute"
-
-    t = time.process_time()
-    build_map(lattice, samples, radius_function(None), comps=comps)
-    rest_s = time.process_time() - t
+    assert running.table.manifolds == full.manifolds, "the running table differs"
     return {
-        f"poses_{rolls}roll": len(samples),
-        f"grouping_full_cpu_s_{rolls}roll": round(full_s, 4),
-        f"grouping_incremental_per_tile_cpu_s_{rolls}roll": round(statistics.median(per_tile), 4),
-        f"grouping_incremental_feed_whole_map_cpu_s_{rolls}roll": round(feed_s, 3),
-        f"build_map_without_grouping_cpu_s_{rolls}roll": round(rest_s, 3),
+        f"poses_{n}": n,
+        f"manifolds_{n}": len(full.manifolds),
+        f"full_grouping_cpu_s_{n}": round(grouping_s, 3),
+        f"full_build_map_cpu_s_{n}": round(build_s, 3),
+        f"running_per_tile_cpu_s_{n}": round(statistics.median(per_tile), 4),
+        f"running_per_tile_max_cpu_s_{n}": round(max(per_tile), 4),
+        f"running_feed_whole_map_cpu_s_{n}": round(feed_s, 2),
     }
 
 
-def measure_store(figures: dict[str, float], checkpoints: int = 4) -> None:
+def measure_store(figures: dict[str, float], dtheta: float = 0.056,
+                  marks: tuple[int, ...] = (10_000, 50_000), cold_up_to: int = 20_000) -> None:
     import sys
     import tempfile
     from pathlib import Path
@@ -132,7 +137,7 @@ def measure_store(figures: dict[str, float], checkpoints: int = 4) -> None:
     url = f"sqlite:///{tempfile.mkdtemp(prefix='gs-incr-')}/bench.db"
     db.upgrade(url, "head")
     sessions = db.make_sessionmaker(db.make_engine(url))
-    grid = PoseGridSpec(dtheta=math.radians(10), r_min=0.0, r_max=0.05, dr=0.01,
+    grid = PoseGridSpec(dtheta=dtheta, r_min=0.0, r_max=0.05, dr=0.01,
                         attitudes=AttitudeSpec(rolls=4))
     with sessions() as s:
         obj = ObjectRow(kind="named", name="sphere", properties={})
@@ -140,65 +145,81 @@ def measure_store(figures: dict[str, float], checkpoints: int = 4) -> None:
         s.commit()
         spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid,
                                strategy={"name": "grid"}, refinement={"levels": 0})
-        eid = create_exploration(s, spec=spec, tile_target_poses=TILE, max_poses=10**7).id
+        eid = create_exploration(s, spec=spec, tile_target_poses=4 * TILE, max_poses=10**7).id
         tiles = []
-        while leased := lease_tiles(s, worker_id="bench", n=64, lease_seconds=3600):
+        while leased := lease_tiles(s, worker_id="bench", n=256, lease_seconds=36000):
             tiles += leased
-        marks = {round(len(tiles) * (k + 1) / (checkpoints + 1)) for k in range(checkpoints)}
         poses = 0
-        for n, tile in enumerate(tiles):
-            poses += ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
-                                    worker_id="bench",
-                                    results=[oracle_result(p) for p in tile.poses()]).inserted
+
+        def ingest(tile) -> int:  # type: ignore[no-untyped-def]
+            n = ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                               worker_id="bench",
+                               results=[oracle_result(p) for p in tile.poses()]).inserted
             s.commit()
-            if n + 1 not in marks:
+            return n
+
+        pending = list(marks)
+        for k, tile in enumerate(tiles):
+            poses += ingest(tile)
+            last = k == len(tiles) - 2
+            if not (pending and poses >= pending[0]) and not last:
                 continue
-            service.refresh_manifolds(s, eid)  # the state current at the tile before
+            if pending and poses >= pending[0]:
+                pending.pop(0)
+            service.refresh_manifolds(s, eid)  # the running map current at this tile
             s.commit()
-            nxt = tiles[n + 1] if n + 1 < len(tiles) else None
-            if nxt is not None:
-                poses += ingest_results(s, tile_id=nxt.tile_id, lease_epoch=nxt.lease_epoch,
-                                        worker_id="bench", results=[
-                                            oracle_result(p) for p in nxt.poses()]).inserted
-                s.commit()
+            poses += ingest(tiles[k + 1])  # one more tile, then its refresh
             timed = {}
-            for mode in ("incremental", "full"):
-                if mode == "full":
-                    service.GROUPINGS._states.clear()
+            for mode in ("running", "cold") if poses <= cold_up_to else ("running",):
+                if mode == "cold":
+                    service.MAPS.clear()
                 t = time.process_time()  # SQLite runs in this process: its work counts
+                wall = time.perf_counter()
                 service.refresh_manifolds(s, eid)
                 s.commit()
-                timed[mode] = time.process_time() - t
-            figures[f"store_refresh_cpu_s_incremental_{poses}poses"] = round(
-                timed["incremental"], 3)
-            figures[f"store_refresh_cpu_s_full_{poses}poses"] = round(timed["full"], 3)
+                timed[mode] = (time.process_time() - t, time.perf_counter() - wall)
+            for mode, (cpu, wall) in timed.items():
+                figures[f"store_refresh_cpu_s_{mode}_{poses}poses"] = round(cpu, 3)
+                figures[f"store_refresh_wall_s_{mode}_{poses}poses"] = round(wall, 3)
             print(figures, flush=True)
-            if nxt is not None:
-                tiles.remove(nxt)
+            if last:
+                break
+            tiles.pop(k + 1)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rolls", default="1,2,4")
-    parser.add_argument("--tiles", type=int, default=5, help="tiles timed at the end")
+    parser.add_argument("--maps", default="10:1,10:4,9:8",
+                        help="maps as Δθ°:rolls (~10k, ~41k, ~101k poses)")
+    parser.add_argument("--tiles", type=int, default=8, help="tiles timed at the end")
     parser.add_argument("--store", action="store_true", help="time refresh_manifolds too")
+    parser.add_argument("--store-dtheta", type=float, default=0.056)
+    parser.add_argument("--store-marks", default="10000,50000")
+    parser.add_argument("--store-cold-up-to", type=int, default=20_000,
+                        help="time the cold refresh only up to this many poses (it reads, "
+                        "computes and writes the whole map: minutes at 100k on a loaded VM)")
     args = parser.parse_args()
     figures: dict[str, float] = {"tile_poses": TILE,
                                  "load_avg_1min_start": round(os.getloadavg()[0], 2)}
-    for rolls in (int(x) for x in args.rolls.split(",") if x):
-        figures.update(measure(rolls, args.tiles))
+    for item in filter(None, args.maps.split(",")):
+        dtheta, rolls = item.split(":")
+        figures.update(measure(float(dtheta), int(rolls), args.tiles))
         print(figures, flush=True)
     if args.store:
-        measure_store(figures)
+        measure_store(figures, args.store_dtheta,
+                      tuple(int(x) for x in args.store_marks.split(",") if x),
+                      args.store_cold_up_to)
     figures["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
     write_results("incremental_manifolds", figures, {"note": (
-        "CPU seconds (process_time) on a shared 2-core machine; per tile: the median over the "
-        "last --tiles tiles of a shuffled arrival. build_map_without_grouping: the rest of a "
-        "refresh's computation (fine labels, volumes, robust scores, summaries), given the "
-        "grouping; the store's read of every pose and write of every assignment come on top. "
-        "store_refresh_cpu_s_*: one refresh_manifolds on SQLite (CPU s of this process, "
-        "SQLite included) after one more tile, with the grouping state kept (incremental) "
-        "and dropped (full).")})
+        "CPU seconds (process_time) on a shared 2-core machine, keys by the map's poses. "
+        "full_*: the whole map at once (grouping.components, then summary.build_map: what a "
+        "refresh computed before issue 21's running map, apart from grouping, which was "
+        "already incremental). running_per_tile: RunningMap.add of one TILE-pose tile into "
+        "the map fed in shuffled order (median and max over the last --tiles tiles); its "
+        "table equals build_map's. store_refresh_*: one refresh_manifolds on SQLite (this "
+        "process's CPU, SQLite included, and wall time) after one more tile of a grid "
+        "exploration, with the running map kept (running) and dropped (cold: every row "
+        "read, everything computed and written).")})
 
 
 if __name__ == "__main__":

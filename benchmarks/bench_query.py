@@ -161,11 +161,21 @@ def _free_port() -> int:
 
 
 class Server:
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, code: Path | None = None) -> None:
+        """`code`: serve the graspscape package of another checkout (a git worktree of an
+        earlier commit: the before of a before/after in one run), put first on the path."""
         self.port = _free_port()
         self.base = f"http://127.0.0.1:{self.port}"
+        env = dict(os.environ)
+        if code is not None:
+            shim = Path(f"/tmp/graspscape_bench_query_code_{os.getpid()}")
+            shim.mkdir(exist_ok=True)
+            link = shim / "graspscape"
+            if not link.exists():
+                link.symlink_to(code.resolve())
+            env["PYTHONPATH"] = f"{shim}{os.pathsep}{env.get('PYTHONPATH', '')}"
         self.proc = subprocess.Popen([sys.executable, __file__, "--serve", url, str(self.port)],
-                                     cwd=REPO)
+                                     cwd=REPO, env=env)
 
     def __enter__(self) -> Server:
         import httpx
@@ -257,7 +267,8 @@ def run_route(base: str, name: str, path: object, per_client: int) -> list[float
     return latencies
 
 
-def measure(url: str, tag: str, figures: dict[str, float]) -> None:
+def measure(url: str, tag: str, figures: dict[str, float], code: Path | None = None,
+            only: set[str] | None = None) -> None:
     import httpx
     from graspscape.services.coordinator import db
     from graspscape.services.coordinator.store.models import PoseRow
@@ -268,12 +279,15 @@ def measure(url: str, tag: str, figures: dict[str, float]) -> None:
     with db.make_sessionmaker(engine)() as s:
         max_id = s.scalar(select(func.max(PoseRow.id))) or 1
     engine.dispose()
-    with Server(url) as server:
-        # Cold map.png: the first drawing of this map version in this process.
-        start = time.perf_counter()
-        httpx.get(f"{server.base}/explorations/1/map.png", timeout=600).raise_for_status()
-        figures[f"map_png_cold_ms_{tag}"] = round((time.perf_counter() - start) * 1000, 1)
+    with Server(url, code) as server:
+        if only is None or "map_png" in only:
+            # Cold map.png: the first drawing of this map version in this process.
+            start = time.perf_counter()
+            httpx.get(f"{server.base}/explorations/1/map.png", timeout=600).raise_for_status()
+            figures[f"map_png_cold_ms_{tag}"] = round((time.perf_counter() - start) * 1000, 1)
         for name, (path, per_client) in routes(1, max_id).items():
+            if only is not None and name not in only:
+                continue
             cpu = server.cpu_s()
             try:
                 ms = np.array(run_route(server.base, name, path, per_client))
@@ -318,6 +332,13 @@ def main() -> int:
                         help="migrate to this revision (e.g. 0010: before the query indexes)")
     parser.add_argument("--build-only", action="store_true",
                         help="build (or find) the databases, measure nothing, write no file")
+    parser.add_argument("--before-code", type=Path,
+                        help="a checkout of an earlier commit (git worktree): its server is "
+                        "measured too on --before-routes, tags ending _before")
+    parser.add_argument("--before-routes", default="manifolds,manifold_label")
+    parser.add_argument("--routes", help="measure only these routes (comma-separated)")
+    parser.add_argument("--results", default="query",
+                        help="results file name (benchmarks/results/NAME.json)")
     parser.add_argument("--serve", nargs=2, metavar=("URL", "PORT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.serve:
@@ -349,12 +370,17 @@ def main() -> int:
         figures[f"poses_{tag}"] = poses
         if args.build_only:
             continue
-        measure(url, tag, figures)
+        only = set(args.routes.split(",")) if args.routes else None
+        if args.before_code is not None:  # the earlier code first, on the same rows
+            measure(url, f"{tag}_before", figures, args.before_code,
+                    set(args.before_routes.split(",")))
+            figures[f"load_avg_1min_after_{tag}_before"] = _load()
+        measure(url, tag, figures, None, only)
         figures[f"load_avg_1min_after_{tag}"] = _load()
     if args.build_only:
         print(figures)
         return 0
-    write_results("query", figures, extra={"note": (
+    write_results(args.results, figures, extra={"note": (
         "uvicorn in a subprocess (one process, FastAPI's thread pool), 8 httpx client threads "
         "in the bench process on the same machine; map_png percentiles are warm (cached per "
         "map version) after the cold first request; csv_first_byte to the first body byte; "

@@ -123,7 +123,6 @@ def _json(content: bytes) -> Response:
 def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
     # The summaries' stored JSON text copied into the answer, the dust line from columns:
     # nothing decoded, validated or encoded again per request (issue 21; migration 0012).
-    manifolds.ensure_manifolds(session, exploration_id)
     final, items = manifolds.stored_texts(session, exploration_id)
     small = [m for m in items if not m.large]
     dust = (DustLine(manifolds=len(small), poses=sum(m.size for m in small),
@@ -146,7 +145,6 @@ def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
 @router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
             responses=_NOT_FOUND, summary="One manifold by its label")
 def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
-    manifolds.ensure_manifolds(session, exploration_id)
     _, items = manifolds.stored_texts(session, exploration_id, _label_number(label))
     if not items:
         raise NotFound(f"exploration {exploration_id} has no manifold {label}")

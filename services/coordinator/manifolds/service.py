@@ -1,13 +1,13 @@
-"""Manifolds in the store: recompute from the stored poses, save, and query.
+"""Manifolds in the store: kept up to date with the stored poses, saved, and queried.
 
-`refresh_manifolds` replaces the exploration's manifold rows and the poses' manifold column
-with what `summary.build_map` computes from every stored pose, and notes on the exploration
-row when (poses done, final); it runs as results arrive (throttled geometrically:
-`maybe_refresh`) and once more, final, when the exploration completes. The grouping comes
-from the process's incremental state (`GROUPINGS`, manifolds/incremental.py): a refresh links
-in only the poses stored since the last one; the rest of the map is recomputed. The
-object mesh is needed only for volumes (surface radius along each approach direction); it is
-prepared once per process and object (`objects.geometry`).
+`refresh_manifolds` brings the exploration's manifold rows, the poses' manifold column and
+robust scores up to date and notes on the exploration row when (poses done, final); it runs
+as results arrive (throttled: `maybe_refresh`) and once more, final, when the exploration
+completes. The map is the process's running map of the exploration (`MAPS`, manifolds/live.py
+and running.py): a refresh reads the rows stored since the last one, updates what they change
+and writes only that, so its cost follows the new poses, not the map. The object mesh is
+needed only for volumes (surface radius along each approach direction); it is prepared once
+per process and object (`objects.geometry`).
 The best grasps (/best and its evidence) are read in manifolds/best.py.
 """
 
@@ -54,10 +54,13 @@ from sqlalchemy.orm import Session
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
 REFRESH_EVERY_TILES = 10  # the first incremental refresh: at the 10th finished tile
-# Later ones once the stored poses have grown by a quarter since the last refresh. (A full
-# recompute made refreshing every few tiles cost the square of the exploration's size; a
-# refresh of the running map costs its new poses, see docs/exploration.md.)
+# Later ones once the stored poses have grown by a quarter since the last refresh, or by
+# REFRESH_MAX_POSES, whichever comes first. (A full recompute made refreshing every few
+# tiles cost the square of the exploration's size; a refresh of the running map costs about
+# its new poses, so on a large map the table is refreshed every REFRESH_MAX_POSES poses,
+# each refresh bounded, instead of absorbing a quarter of the map inside one ingest.)
 REFRESH_GROWTH = 0.25
+REFRESH_MAX_POSES = 1_000
 FALLBACK_RADIUS_M = FALLBACK_RADIUS
 # The running maps of the explorations this process refreshes (the coordinator's, the local
 # runner's): after a restart the first refresh reads the whole map once.
@@ -202,28 +205,35 @@ def _freshness(session: Session, exploration_id: int) -> Any:
 def ensure_manifolds(session: Session, exploration_id: int) -> ComputedMap | None:
     """Bring the stored manifolds up to date with the stored poses (commits if it had to).
     Returns the map where it had to compute it, else None (the stored one is current)."""
+    return _ensure(session, exploration_id)[1]
+
+
+def _ensure(session: Session, exploration_id: int) -> tuple[bool, ComputedMap | None]:
+    """(final, the map where it had to compute it)."""
     row = _freshness(session, exploration_id)
     done = row.status in FINISHED_STATUSES
     if row.manifolds_poses_done is not None:
         if row.manifolds_poses_done == row.poses_done and (row.manifolds_final or not done):
-            return None
+            return bool(row.manifolds_final), None
     elif row.poses_done == 0:
-        return None
+        return bool(row.manifolds_final), None
     computed = refresh_manifolds(session, exploration_id, final=done)
     session.commit()
-    return computed
+    return done, computed
 
 
 def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
                   lattice: Lattice) -> None:
     """Incremental refresh as tiles finish: first at the REFRESH_EVERY_TILES-th finished
-    tile, then whenever the stored poses have grown by REFRESH_GROWTH since the last one."""
+    tile, then whenever the stored poses have grown by REFRESH_GROWTH (or REFRESH_MAX_POSES)
+    since the last one."""
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         return
     refreshed_at = row.manifolds_poses_done
     if refreshed_at:
-        due = row.poses_done >= refreshed_at * (1.0 + REFRESH_GROWTH)
+        due = row.poses_done >= refreshed_at + min(refreshed_at * REFRESH_GROWTH,
+                                                   REFRESH_MAX_POSES)
     else:  # never refreshed yet: count finished tiles
         from graspscape.services.coordinator.store.models import TileRow, TileState
         from sqlalchemy import func
@@ -267,9 +277,10 @@ class StoredText:
 
 def stored_texts(session: Session, exploration_id: int,
                  label: int | None = None) -> tuple[bool, list[StoredText]]:
-    """(final, the manifolds by label) without decoding a summary: the text as stored (the
-    routes copy it into their answer). One manifold with `label`. NotFound: no exploration."""
-    final = _freshness(session, exploration_id).manifolds_final
+    """Brought up to date first (`ensure_manifolds`): (final, the manifolds by label) without
+    decoding a summary, the text as stored (the routes copy it into their answer). One
+    manifold with `label`. NotFound: no exploration."""
+    final, _ = _ensure(session, exploration_id)
     query = (select(ManifoldRow.label, ManifoldRow.large, ManifoldRow.size,
                     ManifoldRow.volume_cm3, cast(ManifoldRow.summary, Text))
              .where(ManifoldRow.exploration_id == exploration_id,
@@ -277,5 +288,5 @@ def stored_texts(session: Session, exploration_id: int,
     if label is not None:
         query = query.where(ManifoldRow.label == label)
     rows = session.execute(query.order_by(ManifoldRow.label)).all()
-    return bool(final), [StoredText(lab, bool(large), size, volume or 0.0, text)
-                         for lab, large, size, volume, text in rows]
+    return final, [StoredText(lab, bool(large), size, volume or 0.0, text)
+                   for lab, large, size, volume, text in rows]
