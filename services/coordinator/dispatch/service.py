@@ -348,11 +348,23 @@ class Dispatcher:
         if self._session is None:
             return None
         found: set[str] = set()
-        for reply in self._session.liveliness().get(keys.ALIVE_ALL, timeout=timeout_s):
+        done = threading.Event()
+
+        def collect(reply: zenoh.Reply) -> None:
             if reply.ok is not None:
                 worker_id = keys.worker_of_alive_key(str(reply.ok.key_expr))
                 if worker_id:
                     found.add(worker_id)
+
+        # A callback, not the default reply channel: a client session learns the tokens from
+        # its router and answers the query in place, pushing every reply into the handler
+        # before get() returns and under the session's lock. The default channel is bounded
+        # (256): with more workers than that, get() waited for a reader that runs only after
+        # it returns, and the session's network thread for the lock (the whole session hung).
+        self._session.liveliness().get(
+            keys.ALIVE_ALL, zenoh.handlers.Callback(collect, done.set), timeout=timeout_s)
+        if not done.wait(timeout_s + 5.0):
+            return None  # not answered in time: asked again later, never half an answer
         return found
 
     def _orphan_sweep(self) -> None:
