@@ -174,8 +174,9 @@ class Server:
             if not link.exists():
                 link.symlink_to(code.resolve())
             env["PYTHONPATH"] = f"{shim}{os.pathsep}{env.get('PYTHONPATH', '')}"
+        # Run from the checkout served: its own configs/ (settings it knows).
         self.proc = subprocess.Popen([sys.executable, __file__, "--serve", url, str(self.port)],
-                                     cwd=REPO, env=env)
+                                     cwd=REPO if code is None else code, env=env)
 
     def __enter__(self) -> Server:
         import httpx
