@@ -200,9 +200,14 @@ class RunningMap:
         for a, known in by_att.items():
             known.sort()
             own_pos = np.array([grid.position(p) for p in known])
-            near = self._tree.query_ball_point(grid.embedding[own_pos], self._rho * (1 + 1e-9))
+            own_emb = grid.embedding[own_pos]
+            near = self._tree.query_ball_point(own_emb, self._rho * (1 + 1e-9))
+            far = self._far[a]
+            if len(far):  # only those the batch may be nearer to than their owner
+                dist, _ = cKDTree(own_emb).query(grid.embedding[far], k=1)
+                far = far[dist ** 2 <= self._d2[far * n_a + a] + 1e-9]
             cand = np.unique(np.concatenate([np.concatenate([np.asarray(x, dtype=np.int64)
-                                                             for x in near]), self._far[a]]))
+                                                             for x in near]), far]))
             idx, d2 = nearest_known(grid, known, cand)
             f = cand * n_a + a
             cur = self._d2[f]
