@@ -21,16 +21,16 @@ from tests.factories import oracle_result
 @pytest.mark.slow
 def test_manifolds_refresh_while_exploring_in_steps_that_grow(sessions, named_object,
                                                               monkeypatch) -> None:
-    # Every refresh computes the map once (compute_map, by its module's name): the poses
-    # stored then tell the steps apart.
+    # Every refresh writes the map once (`write`, by its name in the service module): the
+    # poses stored then tell the steps apart.
     refreshes: list[int] = []
-    compute = service.compute_map
+    write = service.write
 
     def recording(session, exploration_id, *args, **kwargs):
         refreshes.append(session.get(ExplorationRow, exploration_id).poses_done)
-        return compute(session, exploration_id, *args, **kwargs)
+        return write(session, exploration_id, *args, **kwargs)
 
-    monkeypatch.setattr(service, "compute_map", recording)
+    monkeypatch.setattr(service, "write", recording)
     spec = ExplorationSpec(
         object_id=named_object("sphere"),
         grid={"dtheta": math.radians(30), "r_min": 0.0, "r_max": 0.02, "dr": 0.01},
@@ -76,9 +76,9 @@ def test_a_map_picture_draws_the_stored_table_and_refreshes_only_a_stale_one(
         eid = create_exploration(s, spec=spec, tile_target_poses=20, max_poses=10**6).id
     run_local(sessions, lambda poses, match=None: [oracle_result(p) for p in poses])
     computed = []
-    compute = service.compute_map
-    monkeypatch.setattr(service, "compute_map",
-                        lambda *a, **k: computed.append(1) or compute(*a, **k))
+    update = service.update_state  # the running map brought up to date: a refresh's work
+    monkeypatch.setattr(service, "update_state",
+                        lambda *a, **k: computed.append(1) or update(*a, **k))
     with sessions() as s:
         row = s.get(ExplorationRow, eid)
         assert (row.manifolds_poses_done, row.manifolds_final) == (row.poses_done, True)
