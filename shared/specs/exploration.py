@@ -178,6 +178,11 @@ class CertificationSpec(BaseModel):
         default=0.05, ge=0.0, le=0.5,
         description="budget: extra evaluations as a share of the exploration's other planned "
         "poses, shared among the large manifolds (0: no certification)")
+    core_share: float = Field(
+        default=0.5, ge=0.0, le=1.0,
+        description="of that budget, the share kept for core claims: completing N_δ around "
+        "poses deep inside large manifolds, so the robust core is claimed where it is (they "
+        "also take what the best grasps leave; 0: no claims)")
     candidates: int = Field(
         default=3, ge=0, le=20,
         description="per large manifold, its best poses by point quality (μs) whose N_δ is "

@@ -12,11 +12,17 @@ as the middle of a large held region. Certification evaluates, per large manifol
    (σ_pos, σ_ang) around it: off-lattice poses drawn deterministically from the centre's key,
 
 within a budget of `share` × the exploration's other planned poses, shared evenly among the
-large manifolds in each round (`plan`). Each certification round is planned at a quiescent
-point from every stored result, so the plan is a function of the stored results and the
-spec (docs/exploration.md, "Determinism"); a round whose robust best changed (its neighbours
-dropped) certifies the new one in the next round, until nothing is left to do or the budget
-is spent.
+large manifolds in each round (`plan`); and
+
+3. core claims (`claims`): the missing members of N_δ ∪ {p} around poses deep inside large
+   manifolds, so that the robust core is claimed where it is (a claim needs p and its whole
+   N_δ known and in one manifold, manifolds/robust.robust_core), with `core_share` of the
+   budget at least (certify_store.certification_round splits it).
+
+Each certification round is planned at a quiescent point from every stored result, so the plan
+is a function of the stored results and the spec (docs/exploration.md, "Determinism"); a round
+whose robust best changed (its neighbours dropped) certifies the new one in the next round,
+until nothing is left to do or the budget is spent.
 
 A robust claim (`Evidence.certified`) needs the centre held, every member of N_δ known
 (evaluated or shortcut-inferred), the robust label over N_δ ∪ {p} (s_δ ≥ 0.9), and, where
@@ -27,8 +33,10 @@ grasp type.
 from __future__ import annotations
 
 import hashlib
+import heapq
 import math
 import random
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -36,6 +44,7 @@ from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.robust import (
     ROBUST_MIN,
+    Neighbourhoods,
     RobustLabel,
     RobustScore,
     neighbourhood,
@@ -48,6 +57,9 @@ from graspscape.shared.specs.pose import Pose
 # reason column is what a plan row has room for (16 characters; ids below 10¹¹), and it ties
 # every certification evaluation to the grasp it certifies, across coordinator restarts.
 REASON_PREFIX = "cert:"
+# The plan reason of a core-claim evaluation: it serves a claim about the poses around it, not
+# one pose row (its centre may not be stored yet).
+CLAIM_REASON = f"{REASON_PREFIX}core"
 # Certification rounds after local search at most: each waits for the round before it, and
 # each one more certifies only robust bests that the round before disqualified.
 MAX_ROUNDS = 4
@@ -82,6 +94,7 @@ class Work:
     point: Point | None
     centre: Point
     label: int
+    claim: bool = False  # a core claim's evaluation (`claims`), not a returned grasp's
 
 
 def robust_best(members: Iterable[Point], samples: Mapping[Point, StoredPose],
@@ -207,6 +220,84 @@ def plan(
                     out.append(w)
                     room -= 1
                     left -= 1
+    return out
+
+
+def depths(hood: Callable[[Point], Iterable[Point]], label_at: Mapping[Point, int],
+           inside: set[int]) -> dict[Point, int]:
+    """Steps of N_δ from each point labelled with one of `inside` to the nearest point of
+    another label (−1, not viable, included): 1 where a member of its own N_δ differs. Points
+    of a manifold with no such point anywhere get none (the caller ranks them deepest)."""
+    out: dict[Point, int] = {}
+    queue: deque[Point] = deque()
+    for p, label in label_at.items():
+        if label in inside and any(label_at.get(q, -1) != label for q in hood(p)):
+            out[p] = 1
+            queue.append(p)
+    while queue:
+        p = queue.popleft()
+        for q in hood(p):
+            if q not in out and label_at.get(q, -1) == label_at[p]:
+                out[q] = out[p] + 1
+                queue.append(q)
+    return out
+
+
+def claims(lattice: Lattice, samples: Mapping[Point, StoredPose], label_at: Mapping[Point, int],
+           manifolds: Sequence[Manifold], *, room: int, taken: set[str],
+           start_below: int | None = None) -> list[Work]:
+    """Core claims (pass 3): evaluations that complete N_δ ∪ {p} around poses deep inside the
+    large `manifolds`, at most `room` of them; a new candidate is started only while fewer
+    than `start_below` (default `room`) are planned, so a round can keep part of the room for
+    the next one without leaving a candidate too dear for its half.
+
+    `label_at`: the map's label of every finest point (−1: not viable), the interpolated one
+    where a point is not stored. A candidate p lies in a large manifold and every member of
+    N_δ ∪ {p} carries its label, stored or interpolated: no evaluated neighbour disagrees.
+    Candidates are taken greedily, cheapest first — the fewest members still unknown and not
+    yet planned, so a claim next to one already planned costs one or two evaluations and the
+    claims grow as blocks — then the deepest (`depths`: the farthest from any other label,
+    where the interpolated map is least likely wrong), then the larger manifold. A candidate
+    is completed whole or not at all: a part of N_δ claims nothing. Whether the claim holds
+    is for the results to say: a member that lands elsewhere breaks it, and the next round
+    plans from the new map."""
+    if room <= 0:
+        return []
+    large = {m.label: i for i, m in enumerate(manifolds)}  # manifolds come largest first
+    hood = Neighbourhoods(lattice)
+    deep = depths(hood, label_at, set(large))
+    seen = set(taken)
+    planned: set[Point] = set()
+
+    def need(p: Point) -> list[Point]:
+        return [q for q in (p, *sorted(hood(p))) if q not in samples and q not in planned]
+
+    heap = []
+    for p, label in label_at.items():
+        if label not in large or (p in deep and deep[p] < 2):
+            continue  # a member of N_δ ∪ {p} carries another label
+        todo = need(p)
+        if todo:
+            heap.append((len(todo), -deep.get(p, 1 << 20), large[label], p))
+    heapq.heapify(heap)
+    out: list[Work] = []
+    start_below = room if start_below is None else min(room, start_below)
+    while heap and room > 0 and len(out) < start_below:
+        cost, depth, rank, p = heapq.heappop(heap)
+        todo = need(p)
+        if len(todo) < cost:  # members planned since it was ranked: rank it again
+            if todo:
+                heapq.heappush(heap, (len(todo), depth, rank, p))
+            continue
+        if len(todo) > room:
+            continue
+        for q in todo:
+            planned.add(q)
+            key = lattice.pose(q).key()
+            if key not in seen:
+                seen.add(key)
+                out.append(Work(lattice.pose(q), q, p, label_at[p], claim=True))
+                room -= 1
     return out
 
 

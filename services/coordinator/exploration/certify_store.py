@@ -46,16 +46,17 @@ def _chunks(items: Sequence[str]) -> list[Sequence[str]]:
     return [items[i : i + _KEY_CHUNK] for i in range(0, len(items), _KEY_CHUNK)]
 
 
-def certification_plans(session: Session, exploration_id: int) -> dict[str, int]:
-    """Pose key → the id of the pose row it certifies, for every certification plan."""
+def certification_plans(session: Session, exploration_id: int) -> dict[str, int | None]:
+    """Pose key → the id of the pose row it certifies, for every certification plan (None:
+    a core claim's evaluation, `certify.CLAIM_REASON`)."""
     rows = session.execute(
         select(PosePlanRow.pose_key, PosePlanRow.reason).where(
             PosePlanRow.exploration_id == exploration_id,
             PosePlanRow.reason.like(f"{certify.REASON_PREFIX}%")))
-    out = {}
+    out: dict[str, int | None] = {}
     for key, reason in rows:
         centre = certify.centre_id_of(reason)
-        if centre is not None:
+        if centre is not None or reason == certify.CLAIM_REASON:
             out[key] = centre
     return out
 
@@ -127,16 +128,29 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
     scores = robust_scores(lattice, samples, [p for m in manifolds for p in m.members])
     taken = {s.key for s in samples.values()} | set(session.scalars(
         select(PosePlanRow.pose_key).where(PosePlanRow.exploration_id == exploration_id)))
+    # The best grasps may spend all but the core claims' share; the claims get the rest of the
+    # budget, so what the grasps leave is not lost. The claims start new candidates until half
+    # of what they have left is planned (all of it in the last round), so a later round can
+    # move them where the results of the earlier ones showed the map to hold.
+    grasps_spent = sum(1 for c in plans.values() if c is not None)
+    grasps_room = total - math.ceil(cert.core_share * total - 1e-9) - grasps_spent
     work = certify.plan(lattice, samples, manifolds, scores, cert,
-                        budget_left=total - len(plans), taken=taken,
+                        budget_left=max(0, grasps_room), taken=taken,
                         radius_m=lambda p: _radius(computed, p))
+    claims_left = total - len(plans) - len(work) if cert.core_share > 0 else 0
+    last = round_ >= spec.refinement.local_search_rounds + certify.MAX_ROUNDS
+    work += certify.claims(
+        lattice, samples, _labels_at(computed), manifolds, room=claims_left,
+        start_below=claims_left if last else -(-claims_left // 2),
+        taken=taken | {w.pose.key() for w in work})
     if orbits is not None:
         # A member is evaluated as its orbit's representative, mirrored onto it on arrival.
         work = [w if w.point is None else certify.Work(
             lattice.pose(orbits.representative(w.point)), orbits.representative(w.point),
-            w.centre, w.label) for w in work]
+            w.centre, w.label, w.claim) for w in work]
     ids = {k: i for i, k in _ids_of_keys(session, exploration_id,
-                                         {samples[w.centre].key for w in work}).items()}
+                                         {samples[w.centre].key for w in work
+                                          if not w.claim}).items()}
     out: list[Planned] = []
     seen: set[str] = set()
     for w in work:
@@ -146,8 +160,19 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
         seen.add(key)
         out.append(Planned(
             w.pose, plan_level=lattice.depth if w.point is None else lattice.birth(w.point),
-            tile_level=lattice.depth, reason=certify.reason_for(ids[samples[w.centre].key]),
-            round=round_))
+            tile_level=lattice.depth, round=round_,
+            reason=certify.CLAIM_REASON if w.claim
+            else certify.reason_for(ids[samples[w.centre].key])))
+    return out
+
+
+def _labels_at(computed: ComputedMap) -> dict[Point, int]:
+    """The map's label of every finest point: a stored pose's manifold (−1 where it did not
+    hold), else the interpolated fine label."""
+    out = {p: int(x) for p, x in zip(computed.fine.points, computed.fine.labels, strict=True)}
+    for p, s in computed.samples.items():
+        if p in out:
+            out[p] = computed.label_of.get(p, -1) if s.viable else -1
     return out
 
 

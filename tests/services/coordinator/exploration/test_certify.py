@@ -149,6 +149,74 @@ def test_budget_is_a_share_of_the_other_planned_poses() -> None:
     assert certify.centre_id_of("search") is None
 
 
+def _fine_points(lattice: Lattice) -> list[Point]:
+    n_i = (lattice.n_r << lattice.depth) + 1
+    return [Point(K, J, i, a) for K, J in lattice.cells(lattice.depth) for i in range(n_i)
+            for a in range(len(lattice.attitudes))]
+
+
+def test_claims_complete_n_delta_deep_inside_and_grow_as_a_block() -> None:
+    # A cap θ < 1.3 held (manifold 0), dropped elsewhere; stored: the coarse points only, the
+    # finest ones carry the interpolated labels. A claim needs p and its whole N_δ stored and
+    # in the manifold: none yet.
+    fine = _fine_points(LATTICE)
+    label_at = {p: 0 if LATTICE.pose(p).theta < 1.3 else -1 for p in fine}
+    samples = {}
+    for p in fine:
+        if LATTICE.birth(p) == 0:
+            if label_at[p] == 0:
+                samples[p] = _held(p)
+            else:
+                _drop(samples, [p])
+    manifolds = [certify.Manifold(0, tuple(sorted(p for p in samples if label_at[p] == 0)))]
+    hood = {p: neighbourhood(LATTICE, p) for p in fine}
+    first = certify.claims(LATTICE, samples, label_at, manifolds, room=8, taken=set())
+    assert first and len(first) <= 8 and all(w.claim and w.label == 0 for w in first)
+    points = [w.point for w in first]
+    assert len(set(points)) == len(points) and not set(points) & set(samples)
+    # Each centre is completed whole: it and its N_δ are then all known, and in the cap.
+    centres = {w.centre for w in first}
+    known = set(samples) | set(points)
+    assert all({c, *hood[c]} <= known for c in centres)
+    assert all(label_at[q] == 0 for c in centres for q in (c, *hood[c]))
+    # The cheapest first, then the deepest: near the pole, far from the cap's rim (ring 4 of
+    # the finest rings, θ = 1.2; ring 5 drops).
+    assert all(c.ring <= 2 for c in centres), centres
+    # With more room the claims grow as a block: a second centre next to the first costs
+    # fewer evaluations than the first.
+    more = certify.claims(LATTICE, samples, label_at, manifolds, room=40, taken=set())
+    per_centre: dict[Point, int] = {}
+    for w in more:
+        per_centre[w.centre] = per_centre.get(w.centre, 0) + 1
+    costs = list(per_centre.values())
+    assert len(costs) >= 2 and min(costs[1:]) < costs[0]
+    # Completed as planned (all held), the claimed poses are a robust core of the cap.
+    for w in more:
+        samples[w.point] = _held(w.point)
+    in_cap = {p for p in samples if label_at[p] == 0}
+    core = {p for p in in_cap if all(q in in_cap for q in hood[p])}
+    assert {w.centre for w in more} <= core
+
+
+def test_claims_skip_a_pose_whose_stored_neighbour_disagrees_and_keep_to_their_room() -> None:
+    fine = _fine_points(LATTICE)
+    label_at = {p: 0 for p in fine}
+    samples = {p: _held(p) for p in fine if LATTICE.birth(p) == 0}
+    manifolds = [certify.Manifold(0, tuple(sorted(samples)))]
+    # One coarse point dropped: no centre whose N_δ ∪ {p} holds it is ever completed.
+    bad = Point(LATTICE.scale(0) * 2, 0, 2, 0)
+    _drop(samples, [bad])
+    label_at[bad] = -1
+    work = certify.claims(LATTICE, samples, label_at, manifolds, room=30, taken=set())
+    assert 0 < len(work) <= 30
+    assert all(bad != w.centre and bad not in neighbourhood(LATTICE, w.centre) for w in work)
+    assert certify.claims(LATTICE, samples, label_at, manifolds, room=0, taken=set()) == []
+    # A pose planned already (by key) is not planned again.
+    taken = {work[0].pose.key()}
+    again = certify.claims(LATTICE, samples, label_at, manifolds, room=30, taken=taken)
+    assert work[0].pose.key() not in {w.pose.key() for w in again}
+
+
 # --- through the store and the scheduler -----------------------------------------------
 def _dropped(pose: Pose) -> PoseResult:
     return PoseResult(pose=pose, pose_key=pose.key(), outcome=Outcome.NO_GRASP, viable=False,
@@ -190,8 +258,8 @@ def _plan_of(sessions, eid: int) -> list[tuple[str, str]]:
     with sessions() as s:
         plans = certification_plans(s, eid)
         key_of = dict(s.execute(select(PoseRow.id, PoseRow.pose_key)
-                                .where(PoseRow.id.in_(set(plans.values())))).all())
-    return sorted((k, key_of[c]) for k, c in plans.items())
+                                .where(PoseRow.id.in_(set(plans.values()) - {None}))).all())
+    return sorted((k, "core" if c is None else key_of[c]) for k, c in plans.items())
 
 
 def _sphere(sessions) -> int:
