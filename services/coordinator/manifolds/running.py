@@ -306,9 +306,13 @@ class RunningMap:
     def _summary(self, parts: list[int]) -> tuple[float, Callable[[int, bool], ManifoldSummary]]:
         """(volume m³, summary by (label, large)) of the manifold of these components."""
         stats = Stats()
-        own: set[int] = set()
-        core: set[int] = set()
-        own_total = core_total = core_count = 0
+        main = self.comps[parts[0]]
+        # The main component's volumes as kept; a folded speck adds the positions the main
+        # one does not reach (a pass over the specks only: the main one may be most of the map).
+        own_total, core_total = main.own.total, main.core.total
+        own_extra: set[int] = set()
+        core_extra: set[int] = set()
+        core_count = 0
         best: list[Any] = []
         low: list[Any] = []
         robust: list[Any] = []
@@ -317,14 +321,15 @@ class RunningMap:
         for cid in parts:
             comp = self.comps[cid]
             stats.merge(comp.stats)
-            for pos in comp.own.count:
-                if pos not in own:
-                    own.add(pos)
-                    own_total += w[pos]
-            for pos in comp.core.count:
-                if pos not in core:
-                    core.add(pos)
-                    core_total += w[pos]
+            if comp is not main:
+                for pos in comp.own.count:
+                    if pos not in main.own.count and pos not in own_extra:
+                        own_extra.add(pos)
+                        own_total += w[pos]
+                for pos in comp.core.count:
+                    if pos not in main.core.count and pos not in core_extra:
+                        core_extra.add(pos)
+                        core_total += w[pos]
             core_count += comp.core_count
 
             def here(p: Point, c: int = cid) -> bool:
