@@ -5,9 +5,9 @@ decide into planned poses (evaluated once each) and inferred results. The schedu
 inside the ingest transaction, after the exploration's counter update, whose row lock makes
 the batches of one exploration take turns: each sees every result committed before it, so a
 pair of neighbours is always judged by whichever of its two results arrives last. When no
-tile is open any more, a round of local search is planned, then rounds of certification of
-the best grasps (exploration/certify.py), or, after the last, the manifolds are computed for
-good.
+tile is open any more, a round of local search in the large manifolds is planned, then rounds
+of certification of the best grasps and of core claims (exploration/certify.py), or, after the
+last, the manifolds are computed for good.
 """
 
 from __future__ import annotations
@@ -49,7 +49,6 @@ from graspscape.services.coordinator.exploration.tiling import (
     group_tiles,
 )
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.grouping import components
 from graspscape.services.coordinator.manifolds.service import maybe_refresh, refresh_manifolds
 from graspscape.services.coordinator.store.models import ExplorationRow, PosePlanRow, TileRow
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -140,10 +139,7 @@ class AdaptiveStrategy:
             proposals += border_proposals(lattice, p, samples.get, mu_step)
         proposals = self._canonical(proposals, orbits)
         proposals = [q for q in proposals if q.point not in samples]
-        budget = spec.refinement.max_poses - (
-            session.scalar(select(func.count()).select_from(PosePlanRow)
-                           .where(PosePlanRow.exploration_id == batch.exploration_id)) or 0
-        )
+        budget = spec.refinement.max_poses - self._plans(batch)
         refine = [q for q in proposals if q.reason == "refine"]
         keep = [q for q in proposals if q.reason != "refine"] + sorted(
             refine, key=lambda q: (q.level, q.point))[: max(0, budget)]
@@ -163,13 +159,32 @@ class AdaptiveStrategy:
         orbits = symmetry_orbits(session, spec)
         certifying = bool(certification_plans(session, batch.exploration_id))
         if rounds_done < spec.refinement.local_search_rounds and not certifying:
+            # Search in the large manifolds only (≥ 1 % of the viable volume, the map's
+            # `large`): on a map with structure at every scale most manifolds are dust of one
+            # or a few poses, each with its own maxima, and searching them all cost the cube
+            # 40-68 % of its dense grid (docs/exploration.md, "Local search").
+            computed = refresh_manifolds(session, batch.exploration_id, spec, self.lattice,
+                                         samples=samples)
+            self._refreshed = True
+            large = {m.label for m in computed.map.manifolds if m.large}
+            members: dict[int, list[Point]] = {}
+            for p, label in sorted(computed.label_of.items()):
+                if label in large:
+                    members.setdefault(label, []).append(p)
             proposals: list[Proposal] = []
-            for comp in components(self.lattice, samples):
+            for _, comp in sorted(members.items()):
                 maxima = local_maxima(self.lattice, comp, samples.get,
                                       top=spec.refinement.local_search_starts)
                 proposals += search_proposals(self.lattice, maxima, samples.get)
             proposals = self._canonical(proposals, orbits)
-            proposals = [q for q in proposals if q.point not in samples]
+            firsts: dict[Point, Proposal] = {}  # in order: the first proposal of a point
+            for q in proposals:
+                if q.point not in samples:
+                    firsts.setdefault(q.point, q)
+            proposals = list(firsts.values())
+            # `refinement.max_poses` caps the search too (its poses are planned poses like
+            # refinement's): the largest manifolds' best maxima first.
+            proposals = proposals[: max(0, spec.refinement.max_poses - self._plans(batch))]
             if proposals:
                 # Search round k is the exploration's round k (1, 2, …): its tiles are leased
                 # after every tile of the rounds before, refinement included.
@@ -201,6 +216,12 @@ class AdaptiveStrategy:
                               samples=self._samples, final=stage == Stage.FINISHED)
 
     # --- helpers -------------------------------------------------------------------------
+    def _plans(self, batch: Batch) -> int:
+        """Poses planned beyond the coarse pass so far (refinement, search, certification)."""
+        return batch.session.scalar(
+            select(func.count()).select_from(PosePlanRow)
+            .where(PosePlanRow.exploration_id == batch.exploration_id)) or 0
+
     def _load(self, batch: Batch, points: set[Point]) -> dict[Point, StoredPose]:
         return load_samples(batch.session, batch.exploration_id, self.lattice,
                             [self.lattice.pose(q).key() for q in points])
