@@ -30,7 +30,6 @@ import argparse
 import json
 import math
 import os
-import statistics
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -45,20 +44,30 @@ from graspscape.services.coordinator.manifolds.service import compute_map, radiu
 from graspscape.services.coordinator.manifolds.summary import build_map
 from graspscape.services.coordinator.objects.geometry import spec_mesh
 from graspscape.services.coordinator.objects.service import create_named
-from graspscape.services.coordinator.store.models import PoseRow
+from graspscape.services.coordinator.store.models import PosePlanRow, PoseRow
 from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_R
 from graspscape.services.local.run import pybullet_evaluator, run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.objects import ObjectSpec
-from graspscape.shared.specs.results import Outcome, PoseResult
+from graspscape.shared.specs.results import PoseResult
 from graspscape.shared.specs.sim import PlacementSettings, SimSettings
 from sqlalchemy import select
 
 try:
     from benchmarks import bench_exploration_accuracy as accuracy
     from benchmarks._results import RESULTS_DIR, write_results
+    from benchmarks.robust_map_dense import (
+        differing_figures,
+        simulator_digest,
+        start_gap_figures,
+    )
 except ModuleNotFoundError:  # run as a script: benchmarks/ itself is on sys.path
     import bench_exploration_accuracy as accuracy  # type: ignore[no-redef]
+    from robust_map_dense import (  # type: ignore[no-redef]
+        differing_figures,
+        simulator_digest,
+        start_gap_figures,
+    )
 
 PROCESSES = 2
 MODES = ("palm", "clearance")
@@ -128,82 +137,9 @@ def samples_of(lattice: Lattice, results: dict[str, PoseResult]) -> dict:
             for p in accuracy._fine_points(lattice)}
 
 
-def start_gap_figures(lattice: Lattice, results: dict[str, PoseResult]) -> dict[str, float]:
-    """What r became on a dense grid: per nominal r, the median effective r (the palm gap the
-    start used), the share started further out than r (backed off or cleared), the share
-    infeasible; and how many distinct starts the r levels of one direction and attitude make."""
-    out: dict[str, float] = {}
-    by_r: dict[float, list[PoseResult]] = {}
-    for p in accuracy._fine_points(lattice):
-        r = results[lattice.pose(p).key()]
-        by_r.setdefault(round(r.pose.r, 4), []).append(r)
-    for nominal, rs in sorted(by_r.items()):
-        placed = [r.effective_r for r in rs if r.effective_r is not None]
-        tag = f"r{nominal * 100:g}cm"
-        out[f"median_effective_r_m_at_{tag}"] = round(statistics.median(placed), 4)
-        out[f"share_started_beyond_r_at_{tag}"] = round(
-            sum(e > nominal + 0.001 for e in placed) / len(rs), 4)
-        out[f"share_infeasible_at_{tag}"] = round(
-            sum(r.outcome is Outcome.INFEASIBLE for r in rs) / len(rs), 4)
-        out[f"share_held_at_{tag}"] = round(sum(r.viable for r in rs) / len(rs), 4)
-    # Distinct starts: along one normal (direction, attitude), how many different palm gaps
-    # (to 1 mm) its r levels start at, as a share of its r levels.
-    normals: dict[tuple, list[float]] = {}
-    for p in accuracy._fine_points(lattice):
-        r = results[lattice.pose(p).key()]
-        if r.effective_r is not None:
-            normals.setdefault((p.ring, p.azimuth, p.attitude), []).append(r.effective_r)
-    distinct = [len({round(g, 3) for g in gaps}) / len(gaps) for gaps in normals.values()]
-    out["distinct_start_share_per_normal_mean"] = round(statistics.fmean(distinct), 4)
-    return out
-
-
-def differing_figures(lattice: Lattice, samples: dict, dtheta: float) -> dict[str, float]:
-    """Differing-pair shares per step and α between successive steps (bench_exploration_
-    accuracy's count, on this grid)."""
-    out: dict[str, float] = {}
-    shares = accuracy.differing_pairs(lattice, samples)
-    for level, (border, viability) in shares.items():
-        step = f"{math.degrees(dtheta) / 2**level:g}deg"
-        out[f"pairs_differing_share_at_{step}"] = round(border, 4)
-        out[f"pairs_differing_viability_share_at_{step}"] = round(viability, 4)
-    for level in range(1, len(shares)):
-        coarse, fine = shares[level - 1][0], shares[level][0]
-        if coarse > 0 and fine > 0:
-            coarse_deg = math.degrees(dtheta) / 2 ** (level - 1)
-            out[f"alpha_{coarse_deg:g}_to_{coarse_deg / 2:g}deg"] = round(
-                math.log2(coarse / fine), 3)
-    return out
-
-
-def simulator_digest() -> str:
-    """A digest of what a pose result depends on: the source of every graspscape module the
-    evaluation loads (the simulator and the specs it reads, found by importing it, not a
-    folder: other work adds grippers and tools there that no robotiq_3f result depends on)
-    and the gripper's config, so a kept dense grid is never reused after any of them
-    changed."""
-    import hashlib
-    import sys
-
-    import graspscape.workers.sim.evaluate  # noqa: F401
-
-    root = Path(__file__).resolve().parent.parent
-    # The exploration spec is loaded with the specs but no pose result reads it; the URDF
-    # import runs only for URDF grippers (robotiq_3f is a TOML one).
-    files = {Path(m.__file__).resolve() for name, m in list(sys.modules.items())
-             if name.startswith(("graspscape.workers.sim", "graspscape.shared.specs"))
-             and name != "graspscape.shared.specs.exploration"
-             and not name.startswith("graspscape.workers.sim.gripper.urdf")
-             and getattr(m, "__file__", None)}
-    files |= set((root / "configs/grippers").glob("robotiq_3f.*"))
-    digest = hashlib.sha256()
-    for file in sorted(files):
-        digest.update(file.relative_to(root).as_posix().encode())
-        digest.update(file.read_bytes())
-    return digest.hexdigest()[:12]
-
-
-CERTIFY = {"on": True}  # --no-certification clears it
+# --no-certification turns it off; --certification-share and --core-share override the
+# spec's defaults (None: keep them).
+CERTIFY: dict = {"on": True, "share": None, "core_share": None}
 
 
 def exploration_spec(object_id: int, rolls: int, multiple: int, mode: str,
@@ -215,8 +151,9 @@ def exploration_spec(object_id: int, rolls: int, multiple: int, mode: str,
     settings = ExplorationSpec.model_fields["settings"].default_factory()
     refinement = base.refinement.model_copy(
         update={} if refinement_budget is None else {"max_poses": refinement_budget})
+    update = {k: CERTIFY[k] for k in ("share", "core_share") if CERTIFY[k] is not None}
     certification = base.certification.model_copy(
-        update={} if CERTIFY["on"] else {"share": 0.0})
+        update=update if CERTIFY["on"] else {"share": 0.0})
     return base.model_copy(update={
         "label": "robust-map", "certification": certification,
         "settings": settings.model_copy(update={"placement": PlacementSettings(start_gap=mode)}),
@@ -251,11 +188,21 @@ def run_adaptive(name: str, rolls: int, multiple: int, mode: str, dense: dict[st
         computed = compute_map(s, eid)
         rows = s.execute(select(PoseRow.pose_key, PoseRow.worker_id)
                          .where(PoseRow.exploration_id == eid)).all()
+        reason_of = dict(s.execute(select(PosePlanRow.pose_key, PosePlanRow.reason)
+                                   .where(PosePlanRow.exploration_id == eid)).all())
     evaluated = [k for k, w in rows if not (w or "").startswith("shortcut:")]
+    # What spends the evaluations: the coarse pass (no plan row), refinement, local search,
+    # certification of the best grasps (cert:<id>) and core claims (cert:core).
+    spent: dict[str, int] = {}
+    for k in evaluated:
+        reason = reason_of.get(k, "coarse")
+        reason = "cert:grasps" if reason.startswith("cert:") and reason != "cert:core" else reason
+        spent[reason] = spent.get(reason, 0) + 1
     fine = computed.fine
     labels = {p: int(label) for p, label in zip(fine.points, fine.labels, strict=True)}
     counts = {
         "evaluations": len(evaluated),
+        "evaluations_by_reason": dict(sorted(spent.items())),
         "inferred": len(rows) - len(evaluated),
         "off_grid_evaluations": len(off_grid),
         "certification": spec.certification.model_dump(),
@@ -317,6 +264,13 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "gs-bench")
     parser.add_argument("--no-certification", action="store_true",
                         help="the adaptive run without its certification stage")
+    parser.add_argument("--certification-share", type=float, default=None,
+                        help="certification.share (default: the spec's)")
+    parser.add_argument("--core-share", type=float, default=None,
+                        help="certification.core_share: the core claims' part of it (0: none)")
+    parser.add_argument("--tag", default="",
+                        help="appended to the budget tag of the rows and figures, to keep "
+                        "variants (e.g. another certification share) apart under --merge")
     parser.add_argument("--digest", default=None,
                         help="use the kept dense grids of this simulator digest (default: the "
                         "current code's); for code changes known to leave results alone")
@@ -324,7 +278,8 @@ def main() -> None:
     if args.full:
         args.objects, args.rolls, args.levels = FULL["objects"], FULL["rolls"], 2
     args.cache.mkdir(parents=True, exist_ok=True)
-    CERTIFY["on"] = not args.no_certification
+    CERTIFY.update(on=not args.no_certification, share=args.certification_share,
+                   core_share=args.core_share)
     GRID.clear()
     GRID.update(GRIDS[args.grid])
     results_name = "robust_map" + ("" if args.grid == "accuracy" else "_explore")
@@ -336,13 +291,16 @@ def main() -> None:
     if args.merge and results.exists():
         old = json.loads(results.read_text())
         redo = {(o, r, m) for o in args.objects for r in args.rolls for m in args.modes}
-        budgets = {"default" if b == "default" else f"budget{b}" for b in args.budgets}
+        budgets = {("default" if b == "default" else f"budget{b}") + args.tag
+                   for b in args.budgets}
 
         def budget_tag(row: dict) -> str:
+            variant = row.get("variant", "")
             if row["budget"] == "default":
-                return "default"
+                return "default" + variant
             share = row.get("refinement_share")  # rows written before it was kept: the text
-            return f"budget{float(share if share is not None else row['budget'].split()[4]):g}"
+            share = float(share if share is not None else row["budget"].split()[4])
+            return f"budget{share:g}{variant}"
 
         table = [row for row in old.get("table", [])
                  if (row["object"], row["rolls"], row["start_gap"]) not in redo
@@ -372,7 +330,8 @@ def main() -> None:
                     for budget in args.budgets:
                         share = None if budget == "default" else float(budget)
                         got, row = score_config(name, rolls, multiple, mode, dense, pool, share)
-                        btag = "default" if share is None else f"budget{budget}"
+                        btag = ("default" if share is None else f"budget{budget}") + args.tag
+                        row |= {"variant": args.tag, "simulator_digest": digest}
                         for k, v in got.items():
                             figures[f"{name}.rolls{rolls}.{mode}.{btag}.{k}"] = v
                         table.append(row)
