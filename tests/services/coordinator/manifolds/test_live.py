@@ -35,10 +35,10 @@ def stored(s, eid: int) -> tuple:  # type: ignore[no-untyped-def]
 def test_refreshes_tile_by_tile_store_the_whole_rewrite(sessions, named_object) -> None:
     spec = ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
                            strategy={"name": "grid"}, refinement={"levels": 0},
-                           grid={"dtheta": math.radians(30), "r_min": 0.0, "r_max": 0.02,
+                           grid={"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02,
                                  "dr": 0.01, "attitudes": {"rolls": 2}})
     with sessions() as s:
-        eid = create_exploration(s, spec=spec, tile_target_poses=25, max_poses=10**6).id
+        eid = create_exploration(s, spec=spec, tile_target_poses=16, max_poses=10**6).id
         tiles = []
         while leased := lease_tiles(s, worker_id="w", n=50, lease_seconds=60):
             tiles += leased

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.live import fine_labels_of
 from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.summary import build_map
 
@@ -45,22 +46,27 @@ def check(lattice: Lattice, samples: dict[Point, StoredPose], seed: int, batches
         start = end
         running.add(batch)
         seen.update(batch)
-        full, _, label_of = build_map(lattice, seen, radius)
+        full, fine, label_of = build_map(lattice, seen, radius)
         got = running.table
         assert got.manifolds == full.manifolds, f"after {end} of {len(order)}"
         assert round(got.viable_volume_m3 * 1e6, 3) == full.viable_volume_cm3
         assert round(got.non_viable_volume_m3 * 1e6, 3) == full.non_viable_volume_cm3
         assert running.label_of() == label_of
+        assert fine_labels_of(running).labels.tolist() == fine.labels.tolist()
         assert dict(running.scores) == {
             p: sc for p, sc in zip(sorted(seen), [full.robust[seen[p].key]
                                                     for p in sorted(seen)], strict=True)}
 
 
-@pytest.mark.parametrize(("name", "depth", "seed"), [
-    ("60deg-2r-2rolls", 1, 0), ("45deg-1r-2rolls", 1, 2), ("40deg-tilt", 1, 3),
+@pytest.mark.parametrize(("name", "depth", "seed", "batches"), [
+    ("60deg-2r-2rolls", 1, 0, 6), ("45deg-1r-2rolls", 1, 2, 6),
+    pytest.param("40deg-tilt", 1, 3, 6, marks=pytest.mark.slow),
+    pytest.param("30deg-2r-1roll", 2, 1, 25, marks=pytest.mark.slow),
+    pytest.param("25deg-4rolls-x4", 1, 4, 15, marks=pytest.mark.slow),
 ])
-def test_shuffled_arrivals_give_the_full_table(name: str, depth: int, seed: int) -> None:
+def test_shuffled_arrivals_give_the_full_table(name: str, depth: int, seed: int,
+                                               batches: int) -> None:
     lattice = Lattice(GRIDS[name], depth)
     rng = random.Random(seed)
     samples = with_contacts(sampled(lattice, rng, share=0.5), rng)
-    check(lattice, samples, seed, batches=6)
+    check(lattice, samples, seed, batches=batches)
