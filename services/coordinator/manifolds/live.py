@@ -235,6 +235,14 @@ def _columns(m: ManifoldSummary, signature_of: dict[str, Any], *,
     return out
 
 
+def labels_of(running: RunningMap) -> dict[Point, int]:
+    """Every viable sample's manifold label (a pass over the map: for callers that want it
+    all, not for a refresh)."""
+    label = {main: i for i, main in enumerate(running.table.mains)}
+    return {p: label[running.final(p)] for p, s in running.samples.items()  # type: ignore[index]
+            if s.viable}
+
+
 def fine_labels_of(running: RunningMap) -> Any:
     """The running map's finest-lattice labels (grouping.FineLabels), by label."""
     from graspscape.services.coordinator.manifolds.grouping import NON_VIABLE, FineLabels

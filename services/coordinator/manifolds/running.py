@@ -26,7 +26,7 @@ recompute's to the last bit, whatever the arrival order (test_running.py).
 from __future__ import annotations
 
 import heapq
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -391,17 +391,3 @@ class RunningMap:
         self._touched = set()
         self.table = Table(out, [ids[i] for i in order], viable,
                            value(self.non_viable_pos.total))
-
-    # --- reading ---------------------------------------------------------------------------
-    def label_of(self) -> dict[Point, int]:
-        """Every viable sample's manifold label (a pass over the map: for callers that want
-        it all, not for a refresh)."""
-        label = {main: i for i, main in enumerate(self.table.mains)}
-        return {p: label[self.final(p)] for p in self.samples  # type: ignore[index]
-                if self.samples[p].viable}
-
-    def members(self, main: int) -> Iterable[Point]:
-        yield from self.g.members(main)
-        for speck, into in self._fold.items():
-            if into == main:
-                yield from self.g.members(speck)

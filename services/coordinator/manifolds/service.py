@@ -34,6 +34,7 @@ from graspscape.services.coordinator.manifolds.live import (
     MapCache,
     MapState,
     fine_labels_of,
+    labels_of,
     update_state,
     write,
 )
@@ -90,7 +91,7 @@ class ComputedMap:
 
     @cached_property
     def label_of(self) -> dict[Point, int]:
-        return self._running.label_of()
+        return labels_of(self._running)
 
     @cached_property
     def map(self) -> ManifoldMap:

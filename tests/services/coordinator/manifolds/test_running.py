@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.live import fine_labels_of
+from graspscape.services.coordinator.manifolds.live import fine_labels_of, labels_of
 from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.summary import build_map
 
@@ -51,7 +51,7 @@ def check(lattice: Lattice, samples: dict[Point, StoredPose], seed: int, batches
         assert got.manifolds == full.manifolds, f"after {end} of {len(order)}"
         assert round(got.viable_volume_m3 * 1e6, 3) == full.viable_volume_cm3
         assert round(got.non_viable_volume_m3 * 1e6, 3) == full.non_viable_volume_cm3
-        assert running.label_of() == label_of
+        assert labels_of(running) == label_of
         assert fine_labels_of(running).labels.tolist() == fine.labels.tolist()
         assert dict(running.scores) == {
             p: sc for p, sc in zip(sorted(seen), [full.robust[seen[p].key]
