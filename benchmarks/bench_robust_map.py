@@ -353,13 +353,15 @@ def main() -> None:
 
 SUBSET_NOTE = (
     "The issue's set (mug, cube and 2 YCB objects; 1/2/4/8 rolls at 15°, 7.5° at 1 roll; "
-    "--full) needs ~40k dense poses per start-gap mode; on 2 cores shared by 8 sessions "
-    "(~1 pose/s, load average 13-24) the rows here cover mug and cube at 1 roll in both "
-    "start-gap modes, run as: --objects mug cube --modes palm --budgets default 0.25, then "
-    "--modes clearance --merge (the invocation field shows the last). Dense grids: kept under "
-    "--cache with --digest 03670ea44a74 (the code the palm grids were simulated with); the "
-    "clearance grids come from the committed clearance search (its later fixes touch only "
-    "that mode; poses a fix could change were re-simulated).")
+    "--full) needs ~40k dense poses per start-gap mode; on 2 shared cores (2-3 dense poses/s "
+    "with 2 processes, load average 3-19) the palm rows with a simulator_digest were run on "
+    "2026-12-03: mug, cube, banana at 1 roll (--budgets default 0.25, the banana default), mug "
+    "at 2 and 4 rolls, and the variant --budgets 0.2 --certification-share 0.5 --core-share 0.8 "
+    "--tag=-cert50 (mug, cube, banana), all with --merge --digest 514032cf8f5f (the code of "
+    "4d2d4c6; the later step-loop speed-up leaves results alone). Rows without a "
+    "simulator_digest (clearance start gap, mustard bottle) are of 2026-12-01, with the code "
+    "of then (no core claims, local search in every manifold). 8 rolls and the 7.5° step were "
+    "not run.")
 
 
 if __name__ == "__main__":
