@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from tests.services.coordinator.web.live import CHROMIUM_ARGS, chromium_executable
+from tests.services.coordinator.web.live import CHROMIUM_ARGS, ConsoleLog, chromium_executable
 
 
 @pytest.fixture(scope="module")
@@ -24,3 +24,17 @@ def browser() -> Iterator[Any]:
         b = p.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
         yield b
         b.close()
+
+
+# Generous: it only bounds waits for pages following a real exploration on a loaded machine.
+PAGE_TIMEOUT_MS = 240_000
+
+
+@pytest.fixture
+def page(browser: Any) -> Iterator[tuple[Any, ConsoleLog]]:
+    """A fresh browser context and page, with the page's console errors collected."""
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    p = context.new_page()
+    p.set_default_timeout(PAGE_TIMEOUT_MS)
+    yield p, ConsoleLog(p)
+    context.close()

@@ -6,7 +6,6 @@ logs a console error (a script that did not load is one)."""
 from __future__ import annotations
 
 import io
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -38,14 +37,6 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     finally:
         engine.dispose()
 
-
-@pytest.fixture
-def page(browser: Any) -> Iterator[tuple[Any, ConsoleLog]]:
-    context = browser.new_context(viewport={"width": 1280, "height": 900})
-    p = context.new_page()
-    p.set_default_timeout(60_000)
-    yield p, ConsoleLog(p)
-    context.close()
 
 
 def _pixels(png: bytes) -> Any:

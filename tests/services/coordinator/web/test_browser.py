@@ -33,14 +33,6 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveStack]:
         live.stop()
 
 
-@pytest.fixture
-def page(browser: Any) -> Iterator[tuple[Any, ConsoleLog]]:
-    context = browser.new_context(viewport={"width": 1280, "height": 900})
-    p = context.new_page()
-    p.set_default_timeout(TIMEOUT_MS)
-    yield p, ConsoleLog(p)
-    context.close()
-
 
 @pytest.fixture(scope="module")
 def sphere(stack: LiveStack) -> dict[str, Any]:
@@ -106,16 +98,22 @@ def test_best_grasp_picture(stack: LiveStack, sphere: dict[str, Any],
     assert console.errors == []
 
 
-def test_submit_from_the_page(stack: LiveStack, page: tuple[Any, ConsoleLog]) -> None:
-    p, console = page
-    before = stack.api("GET", "/explorations")["total"]
-    p.goto(stack.base + "/#/submit")
-    p.locator("#object").select_option("cube")
+def fill_tiny_grid(p: Any) -> None:
+    """The submit form set to one start gap on a 90° grid, no refinement or robustness tests:
+    an exploration the real worker finishes in seconds."""
     p.locator("#dtheta").fill("90")
     p.locator("#r_min").fill("0.01")
     p.locator("#r_max").fill("0.01")
     p.locator("#levels").select_option("0")
     p.locator("#robustness").select_option("none")
+
+
+def test_submit_from_the_page(stack: LiveStack, page: tuple[Any, ConsoleLog]) -> None:
+    p, console = page
+    before = stack.api("GET", "/explorations")["total"]
+    p.goto(stack.base + "/#/submit")
+    p.locator("#object").select_option("cube")
+    fill_tiny_grid(p)
     p.locator("#label").fill("from the page")
     p.get_by_role("button", name="Submit exploration").click()
     p.wait_for_url(re.compile(r"#/exploration/\d+$"))
@@ -144,11 +142,7 @@ def test_upload_a_mesh_from_the_page(stack: LiveStack, page: tuple[Any, ConsoleL
         files=[{"name": "page_box.obj", "mimeType": "model/obj", "buffer": mesh}])
     p.locator("#mass").fill("0.15")
     p.locator("#units").select_option("mm")
-    p.locator("#dtheta").fill("90")
-    p.locator("#r_min").fill("0.01")
-    p.locator("#r_max").fill("0.01")
-    p.locator("#levels").select_option("0")
-    p.locator("#robustness").select_option("none")
+    fill_tiny_grid(p)
     p.locator("#label").fill("uploaded box")
     p.get_by_role("button", name="Submit exploration").click()
     p.wait_for_url(re.compile(r"#/exploration/\d+$"))
