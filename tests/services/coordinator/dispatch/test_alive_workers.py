@@ -42,6 +42,7 @@ def router() -> Iterator[str]:
     process.wait(10)
 
 
+@pytest.mark.slow  # a router subprocess and 600 sessions' tokens: 2 s
 def test_alive_workers_through_a_router_returns_every_token(
     router: str, sqlite_url: str, sqlite_sessions: sessionmaker[Session]
 ) -> None:
