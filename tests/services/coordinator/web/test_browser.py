@@ -108,16 +108,21 @@ def fill_tiny_grid(p: Any) -> None:
     p.locator("#robustness").select_option("none")
 
 
+def submit_labelled(p: Any, label: str) -> int:
+    """Submits the form under `label` and returns the id of the exploration the page opens."""
+    p.locator("#label").fill(label)
+    p.get_by_role("button", name="Submit exploration").click()
+    p.wait_for_url(re.compile(r"#/exploration/\d+$"))
+    return int(p.url.rsplit("/", 1)[1])
+
+
 def test_submit_from_the_page(stack: LiveStack, page: tuple[Any, ConsoleLog]) -> None:
     p, console = page
     before = stack.api("GET", "/explorations")["total"]
     p.goto(stack.base + "/#/submit")
     p.locator("#object").select_option("cube")
     fill_tiny_grid(p)
-    p.locator("#label").fill("from the page")
-    p.get_by_role("button", name="Submit exploration").click()
-    p.wait_for_url(re.compile(r"#/exploration/\d+$"))
-    eid = int(p.url.rsplit("/", 1)[1])
+    eid = submit_labelled(p, "from the page")
     listed = stack.api("GET", "/explorations")
     assert listed["total"] == before + 1
     row = stack.api("GET", f"/explorations/{eid}")
@@ -143,10 +148,7 @@ def test_upload_a_mesh_from_the_page(stack: LiveStack, page: tuple[Any, ConsoleL
     p.locator("#mass").fill("0.15")
     p.locator("#units").select_option("mm")
     fill_tiny_grid(p)
-    p.locator("#label").fill("uploaded box")
-    p.get_by_role("button", name="Submit exploration").click()
-    p.wait_for_url(re.compile(r"#/exploration/\d+$"))
-    eid = int(p.url.rsplit("/", 1)[1])
+    eid = submit_labelled(p, "uploaded box")
     row = stack.api("GET", f"/explorations/{eid}")
     obj = stack.api("GET", f"/objects/{row['spec']['object_id']}")
     assert (obj["kind"], obj["name"], obj["mesh_format"]) == ("upload", "page_box.obj", "obj")
