@@ -186,14 +186,17 @@ def router_args(listen: str, users_file: Path | None = None) -> list[str]:
 
 
 def children_of(pid: int) -> list[int]:
-    """The pids whose parent is `pid` (a worker supervisor's simulation processes)."""
+    """The live pids whose parent is `pid` (a worker supervisor's simulation processes).
+
+    A killed child stays a zombie until the supervisor's next poll reaps it; it is left out,
+    or a soak would "kill" the same process twice and count one restart for two kills."""
     found = []
     for stat in glob("/proc/[0-9]*/stat"):
         try:
             fields = Path(stat).read_text().rsplit(")", 1)[1].split()
         except OSError:
             continue
-        if int(fields[1]) == pid:
+        if int(fields[1]) == pid and fields[0] != "Z":
             found.append(int(stat.split("/")[2]))
     return sorted(found)
 
