@@ -15,7 +15,10 @@ COPY services services
 COPY migrations migrations
 COPY configs configs
 # Editable, so the coordinator finds migrations/ and alembic.ini next to the package sources.
-RUN pip install --no-cache-dir -e .
+# EXTRAS=rl adds the PPO explorer (CPU torch, stable-baselines3: ~1 GB more); without it a
+# `ppo` exploration is refused with a message naming the extra.
+ARG EXTRAS=""
+RUN pip install --no-cache-dir -e ".${EXTRAS:+[$EXTRAS]}"
 
 ENV GRASPSCAPE_DATABASE__DATA_DIR=/data \
     GRASPSCAPE_API__HOST=0.0.0.0 \
