@@ -9,7 +9,12 @@ from fastapi import APIRouter, Path, Query, Response, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.pages import CursorPage, Page
-from graspscape.services.coordinator.api.responses import UNAUTHORIZED, error
+from graspscape.services.coordinator.api.responses import (
+    UNAUTHORIZED,
+    encoded,
+    error,
+    json_response,
+)
 from graspscape.services.coordinator.exploration import service
 from graspscape.services.coordinator.exploration.schemas import (
     ExplorationCreated,
@@ -191,4 +196,6 @@ def list_poses(
     rows, next_cursor = service.list_poses(
         session, exploration_id=exploration_id, filters=filters, limit=limit, cursor=cursor
     )
-    return CursorPage[PoseOut](items=rows, limit=limit, next_cursor=next_cursor)
+    # Validated once, here, and answered as bytes (FastAPI would validate the page again).
+    return json_response(encoded(CursorPage[PoseOut](items=rows, limit=limit,
+                                                     next_cursor=next_cursor)))

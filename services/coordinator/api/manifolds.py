@@ -12,9 +12,10 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Path, Query, Request, Response
 from fastapi.responses import StreamingResponse
+from graspscape.services.coordinator.api import answers
 from graspscape.services.coordinator.api.deps import SessionDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
-from graspscape.services.coordinator.api.responses import error
+from graspscape.services.coordinator.api.responses import encoded, error
 from graspscape.services.coordinator.api.streams import ClosingStream
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.schemas import PoseOut
@@ -121,16 +122,22 @@ def _json(content: bytes) -> Response:
 @router.get("/explorations/{exploration_id}/manifolds", response_model=ManifoldList,
             responses=_NOT_FOUND, summary="The behavioral manifolds, largest first")
 def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
+    manifolds.ensure_manifolds(session, exploration_id)
+    key = (answers.version(session, exploration_id), "manifolds")
+    return _json(answers.answer(key, lambda: _manifolds_body(session, exploration_id)))
+
+
+def _manifolds_body(session: Any, exploration_id: int) -> bytes:
     # The summaries' stored JSON text copied into the answer, the dust line from columns:
-    # nothing decoded, validated or encoded again per request (issue 21; migration 0012).
+    # nothing decoded, validated or encoded again (issue 21; migration 0012).
     final, items = manifolds.stored_texts(session, exploration_id)
     small = [m for m in items if not m.large]
     dust = (DustLine(manifolds=len(small), poses=sum(m.size for m in small),
                      volume_cm3=round(sum(m.volume_cm3 for m in small), 3)).model_dump()
             if small else None)
     head = json.dumps({"exploration_id": exploration_id, "final": final})[:-1]
-    return _json(f'{head}, "manifolds": [{", ".join(m.summary for m in items)}], '
-                 f'"dust": {json.dumps(dust)}}}'.encode())
+    return (f'{head}, "manifolds": [{", ".join(m.summary for m in items)}], '
+            f'"dust": {json.dumps(dust)}}}'.encode())
 
 
 def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
@@ -145,10 +152,17 @@ def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
 @router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
             responses=_NOT_FOUND, summary="One manifold by its label")
 def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
-    _, items = manifolds.stored_texts(session, exploration_id, _label_number(label))
-    if not items:
-        raise NotFound(f"exploration {exploration_id} has no manifold {label}")
-    return _json(items[0].summary.encode())
+    manifolds.ensure_manifolds(session, exploration_id)
+    number = _label_number(label)
+
+    def body() -> bytes:
+        _, items = manifolds.stored_texts(session, exploration_id, number)
+        if not items:  # raised, so never kept: a later refresh may add the label
+            raise NotFound(f"exploration {exploration_id} has no manifold {label}")
+        return items[0].summary.encode()
+
+    key = (answers.version(session, exploration_id), "manifold", number)
+    return _json(answers.answer(key, body))
 
 
 @router.get(
@@ -198,6 +212,23 @@ def best(
     elif cone_half_angle_deg is not None:
         raise InvalidInput("cone_half_angle_deg needs cone_x, cone_y, cone_z", loc=("query",))
     manifolds.ensure_manifolds(session, exploration_id)
+    # Every parameter is in the key (normalised as the computation reads them): the same
+    # question at the same map version has the same answer (api/answers.py).
+    key = (answers.version(session, exploration_id), "best", manifold, axis,
+           cone_half_angle_deg, max_effort_nm, limit, ranking.Rank(rank).value,
+           pose_error_mm, pose_error_deg)
+    return _json(answers.answer(key, lambda: _best_body(
+        session, exploration_id, manifold=manifold, axis=axis,
+        cone_half_angle_deg=cone_half_angle_deg, max_effort_nm=max_effort_nm, limit=limit,
+        rank=rank, pose_error_mm=pose_error_mm, pose_error_deg=pose_error_deg)))
+
+
+def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
+               axis: tuple[float, float, float] | None, cone_half_angle_deg: float | None,
+               max_effort_nm: float | None, limit: int, rank: ranking.Rank,
+               pose_error_mm: float | None, pose_error_deg: float | None) -> bytes:
+    """/best's answer as JSON bytes: validated once here (BestOut), encoded as FastAPI encodes
+    a response model, so the route returns it as it is, not validated and encoded again."""
     lattice = ranking.lattice_of_exploration(session, exploration_id)
     coarser = coarser_for_error(lattice, pose_error_mm, pose_error_deg)
     rows = ranking.best_poses(
@@ -226,7 +257,7 @@ def best(
                 certifying_held=ev.certifying_held),
         ))
     steps = 1 << coarser
-    return BestOut(
+    out = BestOut(
         exploration_id=exploration_id, manifold=manifold,
         rank=(ranking.DEFAULT_RANK if rank == ranking.Rank.POINT else rank).value,
         delta_steps=steps,
@@ -236,6 +267,7 @@ def best(
         <= steps + 1e-9,
         poses=poses,
     )
+    return encoded(out)
 
 
 def _picture(exploration_id: int, session: Any, fmt: Literal["png", "svg"], cut: str,
