@@ -138,14 +138,19 @@ def soak(work: Path, *, tiles: int, procs: int = 3, kill_every_tiles: int | None
             if done >= tiles_total:
                 break
             if done >= next_kill and procs > 1:
-                ids = _process_ids(worker.output())
-                pid = ids.get(victim)
-                if pid is not None and pid in children_of(worker.pid):
-                    os.kill(pid, signal.SIGKILL)
-                    kills.append({"tiles_done": done, "process": victim,
-                                  "at_s": round(time.monotonic() - started, 1)})
-                victim = victim % (procs - 1) + 1
-                next_kill += kill_every_tiles
+                # The next live process in turn (never process 0); one killed earlier may not
+                # be back yet, and then the kill waits for a live one rather than lapsing.
+                ids, live = _process_ids(worker.output()), set(children_of(worker.pid))
+                for _ in range(procs - 1):
+                    pid = ids.get(victim)
+                    if pid is not None and pid in live:
+                        os.kill(pid, signal.SIGKILL)
+                        kills.append({"tiles_done": done, "process": victim,
+                                      "at_s": round(time.monotonic() - started, 1)})
+                        next_kill += kill_every_tiles
+                        victim = victim % (procs - 1) + 1
+                        break
+                    victim = victim % (procs - 1) + 1
             assert coordinator.alive(), coordinator.output()[-3000:]
             if time.monotonic() - started > timeout_s:
                 raise AssertionError(f"soak not finished after {timeout_s} s: {done} of "
