@@ -5,17 +5,28 @@ batch in one transaction (`store.ingest.ingest_results`). Only the ingest calls 
 making the synthetic results (the workers' side) is not. Each backend gets a fresh database
 migrated to head. Writes benchmarks/results/ingest.json.
 
-    .venv/bin/python benchmarks/bench_ingest.py [--seconds 10] [--batch 100]
+    .venv/bin/python benchmarks/bench_ingest.py [--seconds 10] [--batch 100] [--threads 4]
+
+With `--threads K` (K > 1), K threads, each with its own database session as the coordinator's
+ingest threads have, store the tiles of one exploration at once, the results made and the
+tiles leased before the clock starts: wall-clock poses/s of the K together. That is where the
+exploration row's lock (store/ingest.py) makes ingests take turns; `--own-explorations` gives
+each thread an exploration of its own, the same work without that lock, to compare.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import queue
 import sys
 import tempfile
+import threading
 import time
 import uuid
 from pathlib import Path
+from typing import Any
 
 import psycopg
 
@@ -25,9 +36,14 @@ sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests
 from graspscape.services.coordinator import db  # noqa: E402
 from graspscape.services.coordinator.exploration.scheduler import ingest_results  # noqa: E402
 from graspscape.services.coordinator.exploration.service import create_exploration  # noqa: E402
-from graspscape.services.coordinator.store.models import ObjectRow  # noqa: E402
+from graspscape.services.coordinator.store.models import (  # noqa: E402
+    ExplorationRow,
+    ObjectRow,
+    PoseRow,
+)
 from graspscape.services.coordinator.store.queue import lease_tiles  # noqa: E402
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec  # noqa: E402
+from sqlalchemy import func, select  # noqa: E402
 
 from benchmarks._results import write_results  # noqa: E402
 from tests.factories import fake_results  # noqa: E402
@@ -36,10 +52,7 @@ PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 LEASE_CHUNK = 16  # tiles a worker asks for at once
 
 
-def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
-    db.upgrade(url)
-    engine = db.make_engine(url)
-    sessions = db.make_sessionmaker(engine)
+def _explore(sessions: Any, batch: int) -> int:
     # ~190k poses: more than any run of `seconds` at the target rate can use up.
     grid = PoseGridSpec(dtheta=0.04, r_min=0.0, r_max=0.05, dr=0.01, attitudes={"rolls": 4})
     with sessions() as s:
@@ -47,7 +60,68 @@ def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
         s.add(obj)
         s.commit()
         spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid)
-        create_exploration(s, spec=spec, tile_target_poses=batch, max_poses=10**7)
+        return create_exploration(s, spec=spec, tile_target_poses=batch, max_poses=10**7).id
+
+
+def run_threads(url: str, *, seconds: float, batch: int, threads: int,
+                own_explorations: bool, rate_guess: float = 15_000) -> dict[str, float]:
+    """K threads storing already made batches at once (see the module's docstring)."""
+    db.upgrade(url)
+    engine = db.make_engine(url)
+    sessions = db.make_sessionmaker(engine)
+    explorations = [_explore(sessions, batch) for _ in range(threads if own_explorations else 1)]
+    wanted = int(rate_guess * seconds / batch) + 1
+    work: queue.Queue[Any] = queue.Queue()
+    with sessions() as s:  # in lease order: the explorations' tiles interleave
+        while work.qsize() < wanted:
+            tiles = lease_tiles(s, worker_id="bench", n=LEASE_CHUNK, lease_seconds=3600)
+            if not tiles:
+                break
+            for tile in tiles:
+                work.put((tile, fake_results(tile.poses(), seed=tile.tile_id)))
+    stored = [0] * threads
+    batches = [0] * threads
+    deadline = [0.0]
+
+    def ingest(k: int) -> None:
+        with sessions() as s:
+            while time.perf_counter() < deadline[0]:
+                try:
+                    tile, results = work.get_nowait()
+                except queue.Empty:
+                    return
+                report = ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                                        worker_id="bench", results=results)
+                assert report.inserted == len(results) and report.tile_moved
+                stored[k] += report.inserted
+                batches[k] += 1
+
+    pool = [threading.Thread(target=ingest, args=(k,)) for k in range(threads)]
+    start = time.perf_counter()
+    deadline[0] = start + seconds
+    for t in pool:
+        t.start()
+    for t in pool:
+        t.join()
+    wall = time.perf_counter() - start
+    with sessions() as s:  # the counters are the rows, after concurrent ingest
+        for eid in explorations:
+            row = s.get(ExplorationRow, eid)
+            rows = s.scalar(select(func.count()).select_from(PoseRow)
+                            .where(PoseRow.exploration_id == eid))
+            assert row is not None and row.poses_done == rows, (row, rows)
+    engine.dispose()
+    if work.empty():
+        print(f"  (ran out of leased tiles after {wall:.1f} s: raise rate_guess)")
+    return {"poses": sum(stored), "batches": sum(batches), "seconds": wall,
+            "poses_per_s": sum(stored) / wall}
+
+
+def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
+    db.upgrade(url)
+    engine = db.make_engine(url)
+    sessions = db.make_sessionmaker(engine)
+    _explore(sessions, batch)
     poses = batches = 0
     busy = 0.0
     with sessions() as s:
@@ -73,36 +147,61 @@ def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
     return {"poses": poses, "batches": batches, "seconds": busy, "poses_per_s": poses / busy}
 
 
+def _pg_schema(pg_url: str):
+    """A fresh schema for one PostgreSQL run, dropped after it."""
+    schema = f"bench_ingest_{uuid.uuid4().hex[:8]}"
+    conninfo = pg_url.replace("postgresql+psycopg://", "postgresql://")
+
+    class Schema:
+        def __enter__(self) -> str:
+            with psycopg.connect(conninfo, autocommit=True) as conn:
+                conn.execute(f'CREATE SCHEMA "{schema}"')
+            return f"{pg_url}?options=-csearch_path%3D{schema}"
+
+        def __exit__(self, *exc: object) -> None:
+            with psycopg.connect(conninfo, autocommit=True) as conn:
+                conn.execute(f'DROP SCHEMA "{schema}" CASCADE')
+
+    return Schema()
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="ingest time per backend")
     parser.add_argument("--batch", type=int, default=100, help="target poses per tile")
+    parser.add_argument("--threads", type=int, default=4,
+                        help="also K threads into one exploration (1: only the single thread)")
+    parser.add_argument("--own-explorations", action="store_true",
+                        help="the K threads each into an exploration of its own")
+    parser.add_argument("--backends", default="sqlite,postgresql")
+    parser.add_argument("--no-write", action="store_true", help="print, write no results file")
     parser.add_argument("--pg-url", default=PG_URL)
     args = parser.parse_args()
+    backends = args.backends.split(",")
 
-    figures: dict[str, float] = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        sqlite = run(f"sqlite:///{tmp}/bench.db", seconds=args.seconds, batch=args.batch)
-    print(f"sqlite:     {sqlite}")
-    figures["ingest_poses_per_s_sqlite"] = round(sqlite["poses_per_s"])
-
-    schema = f"bench_ingest_{uuid.uuid4().hex[:8]}"
-    conninfo = args.pg_url.replace("postgresql+psycopg://", "postgresql://")
-    with psycopg.connect(conninfo, autocommit=True) as conn:
-        conn.execute(f'CREATE SCHEMA "{schema}"')
-    try:
-        pg = run(
-            f"{args.pg_url}?options=-csearch_path%3D{schema}",
-            seconds=args.seconds,
-            batch=args.batch,
-        )
-    finally:
-        with psycopg.connect(conninfo, autocommit=True) as conn:
-            conn.execute(f'DROP SCHEMA "{schema}" CASCADE')
-    print(f"postgresql: {pg}")
-    figures["ingest_poses_per_s_postgres"] = round(pg["poses_per_s"])
-
-    write_results("ingest", figures)
+    figures: dict[str, float] = {"load_average_1min_start": round(os.getloadavg()[0], 1)}
+    label = "own_explorations" if args.own_explorations else "one_exploration"
+    for backend in backends:
+        for threads in ([1, args.threads] if args.threads > 1 else [1]):
+            with contextlib.ExitStack() as stack:
+                if backend == "sqlite":
+                    tmp = stack.enter_context(tempfile.TemporaryDirectory())
+                    url = f"sqlite:///{tmp}/bench.db"
+                else:
+                    url = stack.enter_context(_pg_schema(args.pg_url))
+                if threads == 1:
+                    got = run(url, seconds=args.seconds, batch=args.batch)
+                    key = f"ingest_poses_per_s_{backend.replace('postgresql', 'postgres')}"
+                else:
+                    got = run_threads(url, seconds=args.seconds, batch=args.batch,
+                                      threads=threads, own_explorations=args.own_explorations)
+                    key = (f"ingest_poses_per_s_{backend.replace('postgresql', 'postgres')}"
+                           f"_{threads}_threads_{label}")
+            print(f"{backend} x{threads}: {got}", flush=True)
+            figures[key] = round(got["poses_per_s"])
+    figures["load_average_1min_end"] = round(os.getloadavg()[0], 1)
+    if not args.no_write:
+        write_results("ingest", figures)
     return 0
 
 

@@ -249,15 +249,16 @@ _KEY_CHUNK = 500
 _SHOWN_KEYS = 10
 # The exploration's counters; it returns the status and creation time the scheduler needs.
 _COUNT = (
-    update(ExplorationRow)
-    .where(ExplorationRow.id == bindparam("exploration_id"))
-    .values(
-        poses_done=ExplorationRow.poses_done + bindparam("inserted"),
-        viable_count=ExplorationRow.viable_count + bindparam("viable"),
-        updated_at=bindparam("now"),
-    )
+    update(ExplorationRow).where(ExplorationRow.id == bindparam("exploration_id"))
+    .values(poses_done=ExplorationRow.poses_done + bindparam("inserted"),
+            viable_count=ExplorationRow.viable_count + bindparam("viable"),
+            updated_at=bindparam("now"))
     .returning(ExplorationRow.status, ExplorationRow.created_at)
 )
+_KEY_SHARE = (select(ExplorationRow.id).where(ExplorationRow.id == bindparam("exploration_id"))
+              .with_for_update(read=True, key_share=True))
+
+
 def _not_holder(tile: Any, tile_id: int, lease_epoch: int, worker_id: str) -> str | None:
     """Why a report under (worker_id, lease_epoch) is not from the tile's latest lease, or
     None when it is."""
@@ -353,23 +354,20 @@ def store_batch(
     state = tile.state
     # The epochs match (checked above).
     movable = final and tiles.finishable(tile.state)
-    exploration = None
-    if inserted or movable:
-        # The counters first: the exploration row's lock, held to the commit, makes the
-        # ingests of one exploration take turns. The tile, and whether it was the
-        # exploration's last open one, only after it: a statement started once the lock is
-        # held reads the others' tiles as committed (on PostgreSQL each statement reads what
-        # was committed when it started). It also returns what the scheduler needs.
-        exploration = connection.execute(
-            _COUNT,
-            {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
-             "now": now},
-        ).one()
+    if not (inserted or movable):
+        return StoredBatch(_report(results, 0, state, False, []), tile.exploration_id, None,
+                           None)
+    # A shared (key) lock on the exploration's row before the tile's, as fail_tile and the
+    # requeue take their exclusive one (queue.lock_explorations): no crosswise waits. The
+    # insert's foreign key check took it already.
+    if not inserted:
+        connection.execute(_KEY_SHARE, {"exploration_id": tile.exploration_id}).all()
     missing: list[str] = []
     if movable and len(rows) < len(tile_keys):
         # Not every pose of the tile is in the batch (rows ⊆ tile_keys): the tile is done
-        # only if the rest is stored already. One query, under the row lock above, so it
-        # reads the batches of this tile committed before; a complete batch never asks.
+        # only if the rest is stored already. Under the tile's row lock, so this reads the
+        # batches of this tile committed before and two such batches take turns.
+        tiles.lock(session, tile_id)
         absent = sorted(tile_keys.difference(rows))
         missing = sorted(set(absent) - _stored_keys(connection, tile.exploration_id, absent))
         movable = not missing
@@ -377,11 +375,26 @@ def store_batch(
         moved = tiles.finish(session, tile_id=tile_id, lease_epoch=lease_epoch, now=now)
         if moved:
             state = TileState.DONE
-            finish_complete_explorations(session, [tile.exploration_id], now=now)
-    report = IngestReport(
-        inserted=inserted, duplicates=len(results) - inserted, tile_state=state, tile_moved=moved,
-        missing=missing,
-    )
-    if exploration is None or not (inserted or moved):
+    report = _report(results, inserted, state, moved, missing)
+    if not (inserted or moved):  # nothing to count, nothing that could end the exploration
         return StoredBatch(report, tile.exploration_id, None, None)
+    # Last, the exploration's counters: their row lock, held to the commit, makes the batches
+    # of one exploration take turns only from here on (the strategy reacts under it too);
+    # validation, insert and tile run concurrently. A batch moves its tile before it takes the
+    # lock (fail_tile and the requeue lock, then move theirs), so whichever takes it last
+    # reads every other tile as committed in the finish check after it (a statement of its
+    # own: one that waited on the lock would still read the tiles from before).
+    exploration = connection.execute(
+        _COUNT,
+        {"exploration_id": tile.exploration_id, "inserted": inserted, "viable": viable,
+         "now": now},
+    ).one()
+    if moved:
+        finish_complete_explorations(session, [tile.exploration_id], now=now)
     return StoredBatch(report, tile.exploration_id, exploration.status, exploration.created_at)
+
+
+def _report(results: Sequence[PoseResult], inserted: int, state: str, moved: bool,
+            missing: list[str]) -> IngestReport:
+    return IngestReport(inserted=inserted, duplicates=len(results) - inserted, tile_state=state,
+                        tile_moved=moved, missing=missing)

@@ -152,6 +152,19 @@ def finishable(state: str) -> bool:
     return state in _MOVABLE
 
 
+# FOR NO KEY UPDATE: what the tile's own UPDATEs take, so it does not block inserts of poses
+# that reference the tile.
+_LOCK = (select(TileRow.id).where(TileRow.id == bindparam("tile_id"))
+         .with_for_update(key_share=True, read=False))
+
+
+def lock(session: Session, tile_id: int) -> None:
+    """The tile's row lock, held to the commit (no state changes): the ingest of a partial
+    batch takes it before it asks which of the tile's poses are stored, so that two such
+    batches of one tile take turns. No FOR UPDATE on SQLite, whose write lock does it."""
+    session.connection().execute(_LOCK, {"tile_id": tile_id}).all()
+
+
 def finish(session: Session, *, tile_id: int, lease_epoch: int, now: datetime) -> bool:
     """Done, every pose of it stored (the caller checked); False if the epoch moved on."""
     done = session.connection().execute(

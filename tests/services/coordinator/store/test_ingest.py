@@ -513,3 +513,52 @@ def test_a_failure_and_an_ingest_on_the_last_two_tiles_finish_the_exploration(
     assert not errors
     # Finished, and not "done": the failed tile's poses are missing.
     assert exploration_row(sessions, eid).status == "incomplete"
+
+
+def test_threads_ingesting_halves_and_repeats_of_one_exploration_keep_counters_equal_to_rows(
+    sessions: sessionmaker[Session],
+) -> None:
+    """Four threads store every tile of one exploration at once, each tile as two final
+    halves and once whole, every thread in its own order: the tile's lock lets exactly one
+    batch finish each tile, the counters (updated last, under the exploration's row lock)
+    equal the stored rows, and whichever batch ends the last tile finishes the exploration."""
+    with sessions() as s:
+        eid = make_exploration(s, dtheta=1.2, target=12)
+        leased = lease_tiles(s, worker_id="w", n=1000, lease_seconds=600)
+        assert len(leased) >= 6 and not lease_tiles(s, worker_id="w", n=1, lease_seconds=600)
+    batches = []
+    for t in leased:
+        results = fake_results(t.poses(), seed=t.tile_id)
+        half = len(results) // 2
+        batches += [(t, results[:half]), (t, results[half:]), (t, results)]
+    errors: list[BaseException] = []
+    moved: list[int] = []
+
+    def report(k: int) -> None:
+        try:
+            with sessions() as s:
+                for t, results in batches[k::4] + batches[:k:-1] + batches[k::-1]:
+                    r = ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                                       worker_id="w", results=results)
+                    if r.tile_moved:
+                        moved.append(t.tile_id)
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=report, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert not errors
+    assert sorted(moved) == sorted(t.tile_id for t in leased)  # each tile moved exactly once
+    with sessions() as s:
+        rows = pose_count(s, eid)
+        viable = s.scalar(select(func.count()).select_from(PoseRow).where(
+            PoseRow.exploration_id == eid, PoseRow.viable.is_(True)))
+        undone = s.scalar(select(func.count()).select_from(TileRow).where(
+            TileRow.exploration_id == eid, TileRow.state != "done"))
+    row = exploration_row(sessions, eid)
+    assert rows == sum(len(t.poses()) for t in leased) == row.poses_done == row.poses_total
+    assert row.viable_count == viable
+    assert undone == 0 and row.status == "done"
