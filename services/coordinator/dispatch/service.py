@@ -28,6 +28,7 @@ from graspscape.services.coordinator.dispatch.answers import lease_for, report_b
 from graspscape.services.coordinator.dispatch.catalog import WorkContexts, mesh_by_hash
 from graspscape.services.coordinator.dispatch.counters import DispatchCounters
 from graspscape.services.coordinator.dispatch.leases import lease_owners, requeue_lost
+from graspscape.services.coordinator.dispatch.outage import StoreOutage, is_store_outage
 from graspscape.services.coordinator.settings import Settings
 from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.wire import keys
@@ -61,6 +62,7 @@ class Dispatcher:
         self.zenoh_settings = settings.zenoh
         self.sessions = sessions
         self.counters = DispatchCounters(registry)
+        self.outage = StoreOutage()
         self.contexts = WorkContexts()
         # kind -> its pool's queue: result batches apart from leases and object fetches.
         ingest: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
@@ -253,15 +255,22 @@ class Dispatcher:
     def _answer(self, kind: str, query: zenoh.Query) -> None:
         data = query.payload.to_bytes() if query.payload is not None else b""
         handler = {"lease": self._lease, "results": self._results, "object": self._object}[kind]
+        outage = False
         try:
             reply = handler(query, data)
-        except Exception as exc:  # the store failed (database down, lock timeout, ...)
-            log.exception("%s query failed", kind)
+            self.outage.succeeded()
+        except Exception as exc:
+            outage = is_store_outage(exc)
+            if outage:  # the database down, a dropped connection: one line per episode
+                self.outage.failed(kind, exc)
+            else:  # anything else is a bug: its traceback
+                log.exception("%s query failed", kind)
             reply = error(ErrorCode.UNAVAILABLE, f"{type(exc).__name__}: {exc}")
         if isinstance(reply, ErrorReply):
             self.counters.queries.labels(kind, "error").inc()
             self.counters.errors.labels(kind, reply.code.value).inc()
-            log.warning("%s query refused (%s): %s", kind, reply.code.value, reply.message)
+            if not outage:
+                log.warning("%s query refused (%s): %s", kind, reply.code.value, reply.message)
             query.reply_err(encode(reply))
         else:
             self.counters.queries.labels(kind, "ok").inc()
