@@ -28,9 +28,13 @@ from graspscape.services.coordinator.manifolds.summary import (
     dust_line,
     table_rows_of,
 )
+from graspscape.services.coordinator.maps.stored import draw_finished_maps_ahead
 from pydantic import BaseModel, Field
 
 router = APIRouter(tags=["manifolds"], route_class=FiniteJSONRoute)
+# The coordinator draws a finished map's default picture ahead, so that map.png's first read
+# is a stored row, not a render (maps/stored.py, issue 21).
+draw_finished_maps_ahead()
 
 Id = Annotated[int, Path(ge=1, le=2**31 - 1, description="exploration id")]
 _LABEL = r"^([A-Z]{1,3}|[0-9]{1,4})$"

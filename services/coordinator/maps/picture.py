@@ -4,7 +4,8 @@
 The picture is drawn from the stored manifold table (brought up to date first, as every read
 does) and the poses' stored labels (`maps.points`), never by regrouping every pose on read;
 the bytes are kept for the last few (exploration, its version, cut) asked for, since a
-finished map does not change.
+finished map does not change. A finished map's default picture is drawn ahead and stored
+(maps/stored.py), so its first read in a process is a row read.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
     )
     from graspscape.services.coordinator.maps.points import stored_points
     from graspscape.services.coordinator.maps.render import render_map
+    from graspscape.services.coordinator.maps.stored import default_title, stored_default
     from graspscape.services.coordinator.objects.geometry import object_mesh
 
     ensure_manifolds(session, exploration_id)
@@ -62,6 +64,13 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
     if key in _cache:
         _cache.move_to_end(key)
         return _cache[key]
+    if (fmt, cut, phi0_deg, attitude, title, r_level) == (
+            "png", "horizontal", 0.0, 0, default_title(exploration_id), None):
+        # The default picture of a finished map, drawn ahead (maps/stored.py).
+        stored = stored_default(session, row)
+        if stored is not None:
+            _cache[key] = stored
+            return stored
     points = stored_points(session, exploration_id, lattice)
     manifolds = stored_manifolds(session, exploration_id)
     data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),

@@ -139,6 +139,24 @@ class TileRow(Base):
     done_at: Mapped[datetime | None] = mapped_column()
 
 
+class MapPictureRow(Base):
+    """An exploration's default map picture (PNG, as `GET …/map.png` draws it), rendered when
+    its manifold table was last refreshed to final (maps/stored.py, migration 0014), so that the
+    first read of a finished map, in any process, is a row read and not a render. `version`:
+    the map version it was drawn at (maps/stored.version_text); a picture of an older version
+    is never served."""
+
+    __tablename__ = "map_pictures"
+
+    exploration_id: Mapped[int] = mapped_column(
+        ForeignKey("explorations.id", ondelete="CASCADE"), primary_key=True)
+    version: Mapped[str] = mapped_column(String(200))
+    png: Mapped[bytes] = mapped_column(LargeBinary)
+    manifolds: Mapped[int] = mapped_column(Integer)
+    poses: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
 class ManifoldRow(Base):
     """A behavioral manifold: poses that lead to the same grasp type (filled by clustering)."""
 

@@ -235,3 +235,42 @@ def test_the_map_routes_cut_at_one_r(client, sessions, named_object) -> None:
     assert band["inside"].sum() < full["inside"].sum() / 2
     drawn = np.isfinite(band["labels"])
     assert drawn.any() and not (drawn & ~band["inside"]).any()
+
+
+@pytest.mark.slow  # two renders, seconds under load
+def test_a_finished_maps_default_picture_is_drawn_ahead_and_read_from_its_row(
+        sessions, named_object, monkeypatch) -> None:
+    """The refresh to final draws the default picture after its commit and stores it with the
+    map version (maps/stored.py); a process that has not drawn it reads the row, at that
+    version only."""
+    from graspscape.services.coordinator.maps import picture, stored
+    from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
+    from sqlalchemy import select, update
+
+    monkeypatch.setattr(stored, "PRERENDER_MIN_POSES", 0)
+    stored.draw_finished_maps_ahead()  # as the coordinator's API does
+    eid = explore(sessions, named_object("sphere"))
+    stored.wait_prerendered()
+    with sessions() as s:
+        row = s.get(ExplorationRow, eid)
+        assert row.manifolds_final
+        kept = s.scalars(select(MapPictureRow).where(MapPictureRow.exploration_id == eid)).one()
+        assert kept.png.startswith(b"\x89PNG") and kept.version == stored.version_text(row)
+        png = kept.png
+    picture._cache.clear()  # another process: nothing drawn in its memory
+
+    def no_render(*_args, **_kwargs):
+        raise AssertionError("drawn again")
+
+    monkeypatch.setattr(render, "render_map", no_render)
+    title = stored.default_title(eid)
+    with sessions() as s:
+        assert picture_bytes(s, eid, "png", title=title)[0] == png
+        with pytest.raises(AssertionError, match="drawn again"):  # not the default: drawn
+            picture_bytes(s, eid, "png", title=title, attitude=1)
+        # A row of another version is not served.
+        s.execute(update(MapPictureRow).values(version="older"))
+        s.commit()
+        picture._cache.clear()
+        with pytest.raises(AssertionError, match="drawn again"):
+            picture_bytes(s, eid, "png", title=title)

@@ -1,0 +1,123 @@
+"""The default map picture of a finished map, rendered ahead and stored (migration 0014).
+
+Drawing a map reads every stored pose and renders with matplotlib: 2.4 s at 10k poses, 6 s at
+100k and 36 s at 1M on a loaded 2-core machine (benchmarks/results/query.json), while the
+issue's target for `map.png` is 1 s. A finished map no longer changes, so its default picture
+(`GET …/map.png` without parameters) is rendered once, in a background thread, after the
+commit that notes its manifold table final (`draw_finished_maps_ahead`: a listener on
+`explorations.manifolds_final`, which the final refresh and the strategies set), and stored in
+`map_pictures` with the map version it was drawn at. `picture_bytes` serves that row when the
+version still matches, in any coordinator process, also after a restart. Pictures with other
+parameters, and those of running explorations (whose version moves with every ingested
+batch), are drawn on read and kept in the process's memory (maps/picture.py).
+
+Maps under PRERENDER_MIN_POSES are not drawn ahead: they render in well under a second, and
+the tests' many small explorations would each start a render.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any
+
+from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
+from sqlalchemy import delete, event, select
+from sqlalchemy.orm import Session, object_session
+
+log = logging.getLogger("graspscape.coordinator.maps")
+
+PRERENDER_MIN_POSES = 2_000
+_lock = threading.Lock()
+_running: dict[tuple[str, int], threading.Thread] = {}
+
+
+def default_title(exploration_id: int) -> str:
+    """The title the map.png route draws (the default picture's)."""
+    return f"exploration {exploration_id}"
+
+
+def version_text(row: ExplorationRow) -> str:
+    """What a picture depends on: the exploration (its creation), its stored poses and the
+    manifold table stored for them (the refresh mark)."""
+    return (f"{row.created_at.isoformat()}|{row.poses_done}|{row.manifolds_poses_done}|"
+            f"{int(bool(row.manifolds_final))}")
+
+
+def stored_default(session: Session, row: ExplorationRow) -> tuple[bytes, int, int] | None:
+    """The stored default picture (PNG, manifolds, poses) if drawn at the row's version."""
+    found = session.execute(
+        select(MapPictureRow.png, MapPictureRow.manifolds, MapPictureRow.poses).where(
+            MapPictureRow.exploration_id == row.id,
+            MapPictureRow.version == version_text(row))).one_or_none()
+    return None if found is None else (bytes(found[0]), int(found[1]), int(found[2]))
+
+
+def store_default(session: Session, exploration_id: int) -> None:
+    """Render the default picture at the current version and store it (the caller commits)."""
+    from graspscape.services.coordinator.maps.picture import picture_bytes
+
+    data, manifolds, poses = picture_bytes(session, exploration_id, "png",
+                                           title=default_title(exploration_id))
+    row = session.get(ExplorationRow, exploration_id)
+    assert row is not None  # picture_bytes raised NotFound otherwise
+    session.execute(delete(MapPictureRow).where(MapPictureRow.exploration_id == exploration_id))
+    session.add(MapPictureRow(exploration_id=exploration_id, version=version_text(row),
+                              png=data, manifolds=manifolds, poses=poses))
+
+
+def _render(bind: Any, exploration_id: int, key: tuple[str, int]) -> None:
+    try:
+        with Session(bind) as session:
+            store_default(session, exploration_id)
+            session.commit()
+    except Exception:  # a background job: say so, the read renders on demand instead
+        log.warning("exploration %s: the map picture was not drawn ahead", exploration_id,
+                    exc_info=True)
+    finally:
+        with _lock:
+            _running.pop(key, None)
+
+
+def prerender_after_commit(session: Session, exploration_id: int, poses: int) -> None:
+    """Once `session` commits (the refresh to final is then visible to other sessions), draw
+    and store the default picture in a background thread; one at a time per exploration."""
+    if poses < PRERENDER_MIN_POSES:
+        return
+    bind = session.get_bind()
+    key = (str(bind.url), exploration_id)
+
+    def start(_session: Session) -> None:
+        with _lock:
+            if key in _running:
+                return
+            thread = threading.Thread(target=_render, args=(bind, exploration_id, key),
+                                      name=f"map-picture-{exploration_id}", daemon=True)
+            _running[key] = thread
+        thread.start()
+
+    event.listen(session, "after_commit", start, once=True)
+
+
+def _final_set(target: ExplorationRow, value: object, _old: object, _initiator: object) -> None:
+    if value:
+        session = object_session(target)
+        if session is not None:
+            prerender_after_commit(session, target.id, target.poses_done or 0)
+
+
+def draw_finished_maps_ahead() -> None:
+    """From now on, in this process, a map noted final (`manifolds_final` set true on its
+    row: the final refresh, or a strategy noting the last refresh's table as final) has its
+    default picture drawn and stored after that commit. The coordinator's API turns this on
+    (api/manifolds.py); the local runner, which draws its map itself, does not."""
+    if not event.contains(ExplorationRow.manifolds_final, "set", _final_set):
+        event.listen(ExplorationRow.manifolds_final, "set", _final_set)
+
+
+def wait_prerendered(timeout: float = 120.0) -> None:
+    """Wait for the pictures being drawn ahead (tests, benchmarks)."""
+    with _lock:
+        threads = list(_running.values())
+    for thread in threads:
+        thread.join(timeout)
