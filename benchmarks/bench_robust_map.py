@@ -114,22 +114,67 @@ def dense_grid(name: str, mode: str, rolls: int, levels: int, multiple: int, poo
     poses = [lattice.pose(p) for p in accuracy._fine_points(lattice)]
     done: dict[str, PoseResult] = {}
     if path.exists():
-        for line in path.read_text().splitlines():
-            r = PoseResult.model_validate_json(line)
+        lines = path.read_text().splitlines()
+        for i, line in enumerate(lines):
+            try:
+                r = PoseResult.model_validate_json(line)
+            except ValueError:
+                # A --dense-only run may be appending to the file this moment: its last line
+                # can be half written (it is read again next time); any other is damage.
+                if i == len(lines) - 1:
+                    break
+                raise
             done[r.pose_key] = r
-    todo = [p for p in poses if p.key() not in done]
+    nested = nested_rank(rolls, multiple, levels)
+    todo = sorted((p for p in poses if p.key() not in done),
+                  key=lambda p: nested.get(p.key(), (levels, rolls)))
     evaluate = pybullet_evaluator(ObjectSpec(name=name), settings=settings_for(mode), pool=pool)
     t0 = time.perf_counter()
     with path.open("a") as out:
-        for start in range(0, len(todo), 200):
-            for r in evaluate(todo[start : start + 200]):
+        for start in range(0, len(todo), BATCH):
+            for r in evaluate(todo[start : start + BATCH]):
                 done[r.pose_key] = r
                 out.write(r.model_dump_json() + "\n")
             out.flush()
             print(f"  dense {name} [{mode}] {levels} level(s) {rolls} roll(s): "
-                  f"{start + min(200, len(todo) - start)}/{len(todo)} new "
-                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
+                  f"{start + min(BATCH, len(todo) - start)}/{len(todo)} new "
+                  f"({time.perf_counter() - t0:.0f} s; complete: "
+                  f"{complete_grids(done, rolls, multiple, levels)})", flush=True)
     return done
+
+
+# Poses are written per batch: a stopped run loses at most one batch.
+BATCH = 100
+
+
+def _coarser(rolls: int, levels: int) -> list[tuple[int, int]]:
+    """The (levels, rolls) grids nested in this one: roll counts halving down to 1, refinement
+    levels down to 1, coarsest first."""
+    counts = sorted({r for r in (2**k for k in range(rolls.bit_length())) if rolls % r == 0}
+                    | {rolls})
+    return sorted((lv, r) for lv in range(1, levels + 1) for r in counts)
+
+
+def nested_rank(rolls: int, multiple: int, levels: int) -> dict[str, tuple[int, int]]:
+    """Pose key → the coarsest nested grid holding it, so the dense grid is filled coarsest
+    grid first and one stopped midway still holds whole coarser grids to score (the 8-roll
+    grid holds the 1-, 2- and 4-roll ones; the 7.5° grid the 15° one)."""
+    rank: dict[str, tuple[int, int]] = {}
+    for lv, r in _coarser(rolls, levels):
+        lattice = lattice_of(r, multiple, lv)
+        for p in accuracy._fine_points(lattice):
+            rank.setdefault(lattice.pose(p).key(), (lv, r))
+    return rank
+
+
+def complete_grids(done: dict, rolls: int, multiple: int, levels: int) -> str:
+    """Which nested grids the kept poses hold whole (for the progress line)."""
+    whole = []
+    for lv, r in _coarser(rolls, levels):
+        lattice = lattice_of(r, multiple, lv)
+        if all(lattice.pose(p).key() in done for p in accuracy._fine_points(lattice)):
+            whole.append(f"{r} roll(s) {math.degrees(GRID['dtheta']) / 2**lv:g}°")
+    return ", ".join(whole) or "none"
 
 
 def samples_of(lattice: Lattice, results: dict[str, PoseResult]) -> dict:
@@ -271,10 +316,15 @@ def main() -> None:
     parser.add_argument("--tag", default="",
                         help="appended to the budget tag of the rows and figures, to keep "
                         "variants (e.g. another certification share) apart under --merge")
+    parser.add_argument("--dense-only", action="store_true",
+                        help="only fill the kept dense grids (resumable: a stopped run keeps "
+                        "what it wrote), so a long grid can run beside a scoring invocation "
+                        "without two --merge writers of the results file")
     parser.add_argument("--digest", default=None,
                         help="use the kept dense grids of this simulator digest (default: the "
                         "current code's); for code changes known to leave results alone")
     args = parser.parse_args()
+    load_start = round(os.getloadavg()[0], 1)
     if args.full:
         args.objects, args.rolls, args.levels = FULL["objects"], FULL["rolls"], 2
     args.cache.mkdir(parents=True, exist_ok=True)
@@ -316,6 +366,11 @@ def main() -> None:
             multiple = accuracy.azimuth_multiple_of(name)
             for mode in args.modes:
                 levels = args.levels
+                if args.dense_only:
+                    for rolls in args.rolls:
+                        dense_grid(name, mode, rolls, 1, multiple, pool, args.cache, digest)
+                    dense_grid(name, mode, 1, levels, multiple, pool, args.cache, digest)
+                    continue
                 dense1 = dense_grid(name, mode, 1, levels, multiple, pool, args.cache, digest)
                 lattice1 = lattice_of(1, multiple, levels)
                 samples1 = samples_of(lattice1, dense1)
@@ -331,7 +386,8 @@ def main() -> None:
                         share = None if budget == "default" else float(budget)
                         got, row = score_config(name, rolls, multiple, mode, dense, pool, share)
                         btag = ("default" if share is None else f"budget{budget}") + args.tag
-                        row |= {"variant": args.tag, "simulator_digest": digest}
+                        row |= {"variant": args.tag, "simulator_digest": digest,
+                                "load_avg_1min": round(os.getloadavg()[0], 1)}
                         for k, v in got.items():
                             figures[f"{name}.rolls{rolls}.{mode}.{btag}.{k}"] = v
                         table.append(row)
@@ -345,6 +401,7 @@ def main() -> None:
                                       "current_code_digest": simulator_digest(),
                                       "invocation": vars(args) | {"cache": str(args.cache)}},
                             "subset_note": SUBSET_NOTE,
+                            "load_avg_1min_start": load_start,
                             "load_avg_1min": round(os.getloadavg()[0], 1),
                             "dense": dense_figures,
                             "table": table,
