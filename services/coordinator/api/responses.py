@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi.encoders import jsonable_encoder
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import Response
 from pydantic import BaseModel
 
 
@@ -27,10 +26,10 @@ NOT_FOUND = {404: error("no such resource")}
 
 
 def encoded(model: BaseModel) -> bytes:
-    """A model's JSON as FastAPI's JSONResponse writes a response model (jsonable_encoder, then
-    json.dumps with its options). A route that returns these bytes (`json_response`) answers
-    the same document without FastAPI validating and encoding the model a second time."""
-    return JSONResponse(jsonable_encoder(model)).body
+    """A model's JSON as FastAPI 0.165 writes a response model (pydantic's serializer, by
+    alias, in one pass). A route that returns these bytes (`json_response`) answers the same
+    document without FastAPI validating and encoding the model a second time."""
+    return type(model).__pydantic_serializer__.to_json(model, by_alias=True)
 
 
 def json_response(body: bytes) -> Response:

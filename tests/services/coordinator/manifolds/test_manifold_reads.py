@@ -9,12 +9,15 @@ import math
 
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.api import answers
-from graspscape.services.coordinator.api.manifolds import ManifoldList, _manifold_list
+from graspscape.services.coordinator.api.manifolds import BestOut, ManifoldList, _manifold_list
+from graspscape.services.coordinator.api.pages import CursorPage
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
+from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds.grouping import label_name
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
 from graspscape.services.coordinator.store.models import ManifoldRow
 from graspscape.services.coordinator.store.queue import lease_tiles
+from pydantic import TypeAdapter
 from sqlalchemy import create_engine, select, text
 
 from tests.factories import oracle_result
@@ -83,6 +86,13 @@ def test_read_answers_are_kept_per_map_version(client, object_id, sessions) -> N
             ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
                            results=[oracle_result(p) for p in t.poses()])
     first = read()
+    # Written as FastAPI writes the response model (what the routes answered before they
+    # returned bytes): validated and dumped again, the same bytes.
+    adapter = TypeAdapter(BestOut)
+    assert adapter.dump_json(adapter.validate_json(first[0])) == first[0]
+    page = client.get(f"/explorations/{eid}/poses", params={"limit": 5}).content
+    pages = TypeAdapter(CursorPage[PoseOut])
+    assert pages.dump_json(pages.validate_json(page)) == page
     assert read() == first  # kept
     answers.clear()
     assert read() == first  # and what computing it again gives
