@@ -3,11 +3,15 @@ filled from real pybullet evaluations, and its figures hold what they say."""
 
 from __future__ import annotations
 
+import importlib.util
+
 import pytest
 
 from benchmarks.paper_tables import SIZES, run
 
-pytest.importorskip("stable_baselines3", reason="Table 3's PPO needs the optional extra rl")
+# find_spec, not importorskip: importing it loads torch, seconds of every run's collection.
+if importlib.util.find_spec("stable_baselines3") is None:
+    pytest.skip("Table 3's PPO needs the optional extra rl", allow_module_level=True)
 
 
 @pytest.mark.slow  # ~60 s of simulation (3 s is out of reach: a worker pool, PPO, pybullet)
