@@ -22,6 +22,8 @@ Run: python -m benchmarks.bench_robust_map                 (the default subset, 
      python -m benchmarks.bench_robust_map --full          (mug, cube, 2 YCB objects; rolls
                                                             1/2/4/8 at 15°, 7.5° at 1 roll)
      python -m benchmarks.bench_robust_map --start-gap [--levels 2]
+     python -m benchmarks.bench_robust_map --objects mug --rolls 8 --dense-only
+                                                           (fill a big grid first, resumable)
 """
 
 from __future__ import annotations
@@ -57,14 +59,22 @@ try:
     from benchmarks import bench_exploration_accuracy as accuracy
     from benchmarks._results import RESULTS_DIR, write_results
     from benchmarks.robust_map_dense import (
+        BATCH,
+        complete_grids,
         differing_figures,
+        load_kept,
+        nested_rank,
         simulator_digest,
         start_gap_figures,
     )
 except ModuleNotFoundError:  # run as a script: benchmarks/ itself is on sys.path
     import bench_exploration_accuracy as accuracy  # type: ignore[no-redef]
     from robust_map_dense import (  # type: ignore[no-redef]
+        BATCH,
+        complete_grids,
         differing_figures,
+        load_kept,
+        nested_rank,
         simulator_digest,
         start_gap_figures,
     )
@@ -112,20 +122,8 @@ def dense_grid(name: str, mode: str, rolls: int, levels: int, multiple: int, poo
     path = cache / f"robust-dense-{safe}{grid}-q{multiple}-{mode}-{digest}.jsonl"
     lattice = lattice_of(rolls, multiple, levels)
     poses = [lattice.pose(p) for p in accuracy._fine_points(lattice)]
-    done: dict[str, PoseResult] = {}
-    if path.exists():
-        lines = path.read_text().splitlines()
-        for i, line in enumerate(lines):
-            try:
-                r = PoseResult.model_validate_json(line)
-            except ValueError:
-                # A --dense-only run may be appending to the file this moment: its last line
-                # can be half written (it is read again next time); any other is damage.
-                if i == len(lines) - 1:
-                    break
-                raise
-            done[r.pose_key] = r
-    nested = nested_rank(rolls, multiple, levels)
+    done = load_kept(path)
+    nested = nested_rank(lattice_of, rolls, multiple, levels)
     todo = sorted((p for p in poses if p.key() not in done),
                   key=lambda p: nested.get(p.key(), (levels, rolls)))
     evaluate = pybullet_evaluator(ObjectSpec(name=name), settings=settings_for(mode), pool=pool)
@@ -136,45 +134,11 @@ def dense_grid(name: str, mode: str, rolls: int, levels: int, multiple: int, poo
                 done[r.pose_key] = r
                 out.write(r.model_dump_json() + "\n")
             out.flush()
+            whole = complete_grids(lattice_of, done, rolls, multiple, levels, GRID["dtheta"])
             print(f"  dense {name} [{mode}] {levels} level(s) {rolls} roll(s): "
                   f"{start + min(BATCH, len(todo) - start)}/{len(todo)} new "
-                  f"({time.perf_counter() - t0:.0f} s; complete: "
-                  f"{complete_grids(done, rolls, multiple, levels)})", flush=True)
+                  f"({time.perf_counter() - t0:.0f} s; complete: {whole})", flush=True)
     return done
-
-
-# Poses are written per batch: a stopped run loses at most one batch.
-BATCH = 100
-
-
-def _coarser(rolls: int, levels: int) -> list[tuple[int, int]]:
-    """The (levels, rolls) grids nested in this one: roll counts halving down to 1, refinement
-    levels down to 1, coarsest first."""
-    counts = sorted({r for r in (2**k for k in range(rolls.bit_length())) if rolls % r == 0}
-                    | {rolls})
-    return sorted((lv, r) for lv in range(1, levels + 1) for r in counts)
-
-
-def nested_rank(rolls: int, multiple: int, levels: int) -> dict[str, tuple[int, int]]:
-    """Pose key → the coarsest nested grid holding it, so the dense grid is filled coarsest
-    grid first and one stopped midway still holds whole coarser grids to score (the 8-roll
-    grid holds the 1-, 2- and 4-roll ones; the 7.5° grid the 15° one)."""
-    rank: dict[str, tuple[int, int]] = {}
-    for lv, r in _coarser(rolls, levels):
-        lattice = lattice_of(r, multiple, lv)
-        for p in accuracy._fine_points(lattice):
-            rank.setdefault(lattice.pose(p).key(), (lv, r))
-    return rank
-
-
-def complete_grids(done: dict, rolls: int, multiple: int, levels: int) -> str:
-    """Which nested grids the kept poses hold whole (for the progress line)."""
-    whole = []
-    for lv, r in _coarser(rolls, levels):
-        lattice = lattice_of(r, multiple, lv)
-        if all(lattice.pose(p).key() in done for p in accuracy._fine_points(lattice)):
-            whole.append(f"{r} roll(s) {math.degrees(GRID['dtheta']) / 2**lv:g}°")
-    return ", ".join(whole) or "none"
 
 
 def samples_of(lattice: Lattice, results: dict[str, PoseResult]) -> dict:
@@ -410,15 +374,16 @@ def main() -> None:
 
 SUBSET_NOTE = (
     "The issue's set (mug, cube and 2 YCB objects; 1/2/4/8 rolls at 15°, 7.5° at 1 roll; "
-    "--full) needs ~40k dense poses per start-gap mode; on 2 shared cores (2-3 dense poses/s "
-    "with 2 processes, load average 3-19) the palm rows with a simulator_digest were run on "
-    "2026-12-03: mug, cube, banana at 1 roll (--budgets default 0.25, the banana default), mug "
-    "at 2 and 4 rolls, and the variant --budgets 0.2 --certification-share 0.5 --core-share 0.8 "
-    "--tag=-cert50 (mug, cube, banana), all with --merge --digest 514032cf8f5f (the code of "
-    "4d2d4c6; the later step-loop speed-up leaves results alone). Rows without a "
-    "simulator_digest (clearance start gap, mustard bottle) are of 2026-12-01, with the code "
-    "of then (no core claims, local search in every manifold). 8 rolls and the 7.5° step were "
-    "not run.")
+    "--full) needs ~40k dense poses per start-gap mode; on 2 shared cores (1-3 dense poses/s "
+    "with 2 processes at nice 10, load average 3-38) the palm rows were run on 2026-12-03. "
+    "Digest 514032cf8f5f (the code of 4d2d4c6, with --digest): cube and banana at 1 roll, mug "
+    "at 2 and 4 rolls, the -cert50 variant (--budgets 0.2 --certification-share 0.5 "
+    "--core-share 0.8 --tag=-cert50) of cube and banana. Digest 3f992cb9d5cf (the current "
+    "simulator; adaptive runs on a clean snapshot of 805abc2): mug at 1 roll (every figure "
+    "equal to its 514032cf8f5f rows), mustard bottle and power drill at 1 roll (--budgets "
+    "default 0.25, and -cert50), mug at 8 rolls where its rows are present. Rows without a "
+    "simulator_digest (clearance start gap) are of 2026-12-01, with the code of then. The "
+    "7.5° step was not scored.")
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from collections.abc import Callable
 from pathlib import Path
 
 from graspscape.services.coordinator.exploration.lattice import Lattice
@@ -15,6 +16,63 @@ try:
     from benchmarks import bench_exploration_accuracy as accuracy
 except ModuleNotFoundError:  # run as a script: benchmarks/ itself is on sys.path
     import bench_exploration_accuracy as accuracy  # type: ignore[no-redef]
+
+
+# Poses are written per batch: a stopped run loses at most one batch.
+BATCH = 100
+
+LatticeOf = Callable[[int, int, int], Lattice]  # (rolls, azimuth multiple, levels) → lattice
+
+
+def load_kept(path: Path) -> dict[str, PoseResult]:
+    """The poses kept in a dense grid's file, by pose key."""
+    done: dict[str, PoseResult] = {}
+    if not path.exists():
+        return done
+    lines = path.read_text().splitlines()
+    for i, line in enumerate(lines):
+        try:
+            r = PoseResult.model_validate_json(line)
+        except ValueError:
+            # A --dense-only run may be appending to the file this moment: its last line can
+            # be half written (it is read again next time); any other is damage.
+            if i == len(lines) - 1:
+                break
+            raise
+        done[r.pose_key] = r
+    return done
+
+
+def coarser_grids(rolls: int, levels: int) -> list[tuple[int, int]]:
+    """The (levels, rolls) grids nested in this one, itself included: roll counts halving down
+    to 1, refinement levels down to 1, coarsest first."""
+    counts = sorted({r for r in (2**k for k in range(rolls.bit_length())) if rolls % r == 0}
+                    | {rolls})
+    return sorted((lv, r) for lv in range(1, levels + 1) for r in counts)
+
+
+def nested_rank(lattice_of: LatticeOf, rolls: int, multiple: int,
+                levels: int) -> dict[str, tuple[int, int]]:
+    """Pose key → the coarsest nested grid holding it, so the dense grid is filled coarsest
+    grid first and one stopped midway still holds whole coarser grids to score (the 8-roll
+    grid holds the 1-, 2- and 4-roll ones; the 7.5° grid the 15° one)."""
+    rank: dict[str, tuple[int, int]] = {}
+    for lv, r in coarser_grids(rolls, levels):
+        lattice = lattice_of(r, multiple, lv)
+        for p in accuracy._fine_points(lattice):
+            rank.setdefault(lattice.pose(p).key(), (lv, r))
+    return rank
+
+
+def complete_grids(lattice_of: LatticeOf, done: dict, rolls: int, multiple: int, levels: int,
+                   dtheta: float) -> str:
+    """Which nested grids the kept poses hold whole (for the progress line)."""
+    whole = []
+    for lv, r in coarser_grids(rolls, levels):
+        lattice = lattice_of(r, multiple, lv)
+        if all(lattice.pose(p).key() in done for p in accuracy._fine_points(lattice)):
+            whole.append(f"{r} roll(s) {math.degrees(dtheta) / 2**lv:g}°")
+    return ", ".join(whole) or "none"
 
 
 def start_gap_figures(lattice: Lattice, results: dict[str, PoseResult]) -> dict[str, float]:

@@ -1,10 +1,11 @@
 """The robust-map benchmark fills a dense grid coarsest nested grid first, so a long grid
-stopped midway still holds whole coarser grids to score (benchmarks/bench_robust_map.py)."""
+stopped midway still holds whole coarser grids to score (benchmarks/robust_map_dense.py)."""
 
 from __future__ import annotations
 
 from benchmarks.bench_exploration_accuracy import _fine_points
-from benchmarks.bench_robust_map import _coarser, lattice_of, nested_rank
+from benchmarks.bench_robust_map import lattice_of
+from benchmarks.robust_map_dense import coarser_grids, nested_rank
 
 
 def _keys(rolls: int, levels: int) -> set[str]:
@@ -13,13 +14,13 @@ def _keys(rolls: int, levels: int) -> set[str]:
 
 
 def test_nested_grids_are_listed_coarsest_first() -> None:
-    assert _coarser(8, 1) == [(1, 1), (1, 2), (1, 4), (1, 8)]
-    assert _coarser(1, 2) == [(1, 1), (2, 1)]
-    assert _coarser(3, 1) == [(1, 1), (1, 3)]  # 2 does not divide 3: its grid is not nested
+    assert coarser_grids(8, 1) == [(1, 1), (1, 2), (1, 4), (1, 8)]
+    assert coarser_grids(1, 2) == [(1, 1), (2, 1)]
+    assert coarser_grids(3, 1) == [(1, 1), (1, 3)]  # 2 does not divide 3: its grid is not nested
 
 
 def test_each_pose_is_ranked_by_the_coarsest_grid_that_holds_it() -> None:
-    rank = nested_rank(2, 1, 1)
+    rank = nested_rank(lattice_of, 2, 1, 1)
     one, two = _keys(1, 1), _keys(2, 1)
     assert one < two  # the 1-roll grid is nested in the 2-roll one
     assert set(rank) == two
