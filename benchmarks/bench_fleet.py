@@ -222,19 +222,34 @@ def _wait_http(port: int, coordinator: subprocess.Popen) -> None:
     raise RuntimeError("the coordinator did not start")
 
 
-def _trace(url: str, eid: int, pids: list[int],
-           timeout: float) -> list[tuple[float, int, int, list[float], list[int]]]:
+# What the database's sessions of the run do, sampled with each progress sample: batches
+# waiting on the exploration's row lock (store/ingest.py: the counter update), backends in a
+# COMMIT (its WAL flush), and all that are not idle (busy, waiting or between statements of an
+# open transaction).
+_ACTIVITY = """
+SELECT count(*) FILTER (WHERE wait_event_type = 'Lock'
+                          AND query LIKE 'UPDATE explorations SET poses_done%%'),
+       count(*) FILTER (WHERE state = 'active' AND query LIKE 'COMMIT%%'),
+       count(*) FILTER (WHERE state <> 'idle')
+FROM pg_stat_activity WHERE datname = %s AND pid <> pg_backend_pid()
+"""
+
+
+def _trace(url: str, eid: int, pids: list[int], timeout: float) -> list[tuple]:  # type: ignore[type-arg]
     """(time, poses done, poses total, CPU s and anonymous kB of each of `pids`: the
-    coordinator, then the router if any) until done or timeout."""
+    coordinator, then the router if any, and _ACTIVITY's counts) until done or timeout."""
     samples = []
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        done, total, status = _state(url, eid)
-        samples.append((time.monotonic(), done, total, [_proc_cpu_s(p) for p in pids],
-                        [_proc_kb(p, "Anonymous", "smaps_rollup") for p in pids]))
-        if status == "done":
-            break
-        time.sleep(0.5)
+    with psycopg.connect(f"{PG_ADMIN.rsplit('/', 1)[0]}/{PG_DB}", autocommit=True) as conn:
+        while time.monotonic() < deadline:
+            done, total, status = _state(url, eid)
+            activity = conn.execute(_ACTIVITY, (PG_DB,)).fetchone()
+            samples.append((time.monotonic(), done, total, [_proc_cpu_s(p) for p in pids],
+                            [_proc_kb(p, "Anonymous", "smaps_rollup") for p in pids],
+                            activity))
+            if status == "done":
+                break
+            time.sleep(0.5)
     return samples
 
 
@@ -244,7 +259,8 @@ def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int]) -> di
     def at(fraction: float):  # type: ignore[no-untyped-def]
         return next((s for s in samples if s[1] >= fraction * total), samples[-1])
 
-    (t0, d0, _, c0, _), (t1, d1, _, c1, _) = at(0.1), at(0.9)
+    (t0, d0, _, c0, _, _), (t1, d1, _, c1, _, _) = at(0.1), at(0.9)
+    steady = [s[5] for s in samples if t0 <= s[0] <= t1] or [samples[-1][5]]
     lease = np.concatenate([t["lease_ms"] for t in tallies]) if tallies else np.zeros(1)
     ack = np.concatenate([t["ack_ms"] for t in tallies]) if tallies else np.zeros(1)
     inserted = sum(t["inserted"] for t in tallies)
@@ -258,6 +274,10 @@ def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int]) -> di
         f"lease_p99_ms_n{n}": round(float(np.percentile(lease, 99)), 1),
         f"ack_p50_ms_n{n}": round(float(np.percentile(ack, 50)), 1),
         f"ack_p99_ms_n{n}": round(float(np.percentile(ack, 99)), 1),
+        # Means over the samples between 10 % and 90 % (_ACTIVITY).
+        f"pg_waiting_exploration_lock_n{n}": round(float(np.mean([a[0] for a in steady])), 2),
+        f"pg_committing_n{n}": round(float(np.mean([a[1] for a in steady])), 2),
+        f"pg_not_idle_n{n}": round(float(np.mean([a[2] for a in steady])), 2),
     }
     for i, who in enumerate(["coordinator", "router"][:len(rss_peak_kb)]):
         figures.update({
@@ -319,7 +339,9 @@ def main() -> int:
         "poses_per_s between 10 % and 90 % of the exploration stored; latencies as the "
         "workers saw them (lease: query to last reply; ack: batch query to its ack); "
         "finished_nN = 0 where the exploration did not finish within --timeout (the rate is "
-        "then over what was stored)")})
+        "then over what was stored); pg_*_nN: PostgreSQL sessions of the run's database "
+        "(pg_stat_activity, with each 0.5 s progress sample, mean between 10 % and 90 %): "
+        "waiting on the exploration's row lock at the counter update, in a COMMIT, not idle")})
     return 0
 
 
