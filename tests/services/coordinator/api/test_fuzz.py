@@ -10,32 +10,35 @@ from __future__ import annotations
 import itertools
 
 import pytest
-import schemathesis
 from fastapi.testclient import TestClient
 from graspscape.services.coordinator.app import create_app
 from graspscape.services.coordinator.settings import Settings
-from hypothesis import HealthCheck, given
-from hypothesis import settings as hypothesis_settings
-from hypothesis.errors import Unsatisfiable
-from schemathesis import checks
 
 pytestmark = pytest.mark.slow
 
 EXAMPLES_PER_OPERATION = 8
-# No 5xx, and every response matches the document: its status codes, content types, headers
-# and body schemas. (Not "valid data is accepted": the spec cannot express every rule, e.g.
-# "a file or a name".)
-CHECKS = [
-    checks.not_a_server_error,
-    checks.status_code_conformance,
-    checks.content_type_conformance,
-    checks.response_headers_conformance,
-    checks.response_schema_conformance,
-]
 
 
 @pytest.mark.timeout(120)
 def test_no_input_gives_a_server_error(settings: Settings, sessions: object) -> None:
+    # Imported here, not at the top: collecting the default suite (which leaves this slow test
+    # out) would otherwise load schemathesis, seconds of every run.
+    import schemathesis
+    from hypothesis import HealthCheck, given
+    from hypothesis import settings as hypothesis_settings
+    from hypothesis.errors import Unsatisfiable
+    from schemathesis import checks
+
+    # No 5xx, and every response matches the document: its status codes, content types,
+    # headers and body schemas. (Not "valid data is accepted": the spec cannot express every
+    # rule, e.g. "a file or a name".)
+    checks_to_run = [
+        checks.not_a_server_error,
+        checks.status_code_conformance,
+        checks.content_type_conformance,
+        checks.response_headers_conformance,
+        checks.response_schema_conformance,
+    ]
     app = create_app(settings)
     with TestClient(app) as client:
         # Something to find: low ids exist, so GET/cancel/delete reach the services.
@@ -61,7 +64,7 @@ def test_no_input_gives_a_server_error(settings: Settings, sessions: object) -> 
             )
             def check(case: schemathesis.Case) -> None:
                 try:
-                    case.call_and_validate(checks=CHECKS)
+                    case.call_and_validate(checks=checks_to_run)
                 except Exception as exc:  # schemathesis reports failures as exception groups
                     failures.append(f"{case.method} {case.formatted_path}: {exc}"[:1500])
 
