@@ -8,17 +8,20 @@ its two ends arrives; one whose midpoint arrives later is cut then (refinement f
 border between them). Components are kept as explicit member sets:
 
 - joins merge the smaller set into the larger (each point moves O(log n) times in all);
-- a cut link (p, q) is checked by two breadth-first searches run in step from p and from q
-  over the remaining links: they meet (still one component: usually within a few steps,
-  through the new midpoint's own links) or one side runs out first, and that side (the
-  smaller part) becomes a new component.
+- a cut link (p, q) is checked, as soon as it is cut, by two breadth-first searches run in
+  step from p and from q over the remaining links: they meet (still one component: usually
+  within a few steps, through the new midpoint's own links) or one side runs out first, and
+  that side (the smaller part) becomes a new component.
 
 So a batch costs its own points' neighbourhoods plus the parts it splits off, not the map.
-`components()` then folds the specks as `grouping.components` does (`_merge_specks`, which
-looks only at the components below the speck size) and hands the components over in the
-canonical order; the sorted member lists are cached per component and rebuilt only where a
-batch changed that component. Samples are stored results: a point arriving again with the
-same result changes nothing, with a different one the state is rebuilt from everything seen.
+Specks are folded as `grouping.components` does (`_merge_specks`), from votes kept between
+batches (manifolds/specks.py: weights between components, moved with the points that change
+component, decisions redone only where they may change): `update_fold` costs the batch, not
+the specks. `components()` hands the components over in the canonical order (a pass over
+the map: for tests and callers that want them all); the sorted member lists are kept per
+component and rebuilt only where a batch changed that component. Samples are stored
+results: a point arriving again with the same result changes nothing, with a different one
+the state is rebuilt from everything seen.
 """
 
 from __future__ import annotations
@@ -31,11 +34,7 @@ from typing import Protocol
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
-from graspscape.services.coordinator.manifolds.grouping import (
-    SPECK_TOLERANCE_RAD,
-    _merge_specks,
-    speck_neighbours,
-)
+from graspscape.services.coordinator.manifolds.specks import SpeckVotes
 
 Pair = tuple[Point, Point]
 
@@ -66,11 +65,11 @@ class IncrementalGrouping:
         self._members: dict[int, set[Point]] = {}
         self._sorted: dict[int, list[Point]] = {}  # sorted(members), per component
         self._next_id = 0
-        self._speck_nbrs: dict[Point, list[Point]] = {}
-        self._speck_near: dict[Pair, bool] = {}
         # Told of every component change (manifolds/running.py keeps sums per component).
         self.listener: Listener | None = None
-        self.fold: dict[int, int] = {}  # speck → the component it is folded into (last read)
+        self._votes = SpeckVotes(lattice, self.samples, self._comp_of, self._members,
+                                 self.first)
+        self._moved: list[Point] = []  # points that changed component in this batch
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -111,15 +110,17 @@ class IncrementalGrouping:
             for q in lat.attitude_neighbours(p):  # never cut: one link is enough
                 if q in samples:
                     self._link(p, q, None)
-        # Then the links the new points cut (all of them made before this batch).
-        cut: list[Pair] = []
+        # Then the links the new points cut (all of them made before this batch), one at a
+        # time: a connected component less one link is at most two parts, so the search
+        # from the link's ends finds the whole part that left. (Cutting them all first and
+        # searching after could leave the rest in pieces: cuts P–Q and Q–X detach Q, and
+        # P and X, no longer linked, stayed one component.)
         for m in new:
             for pair in self._cutters.pop(m, ()):
-                if self._unlink(pair):
-                    cut.append(pair)
-        for p, q in cut:
-            if self._comp_of[p] == self._comp_of[q]:
-                self._split(p, q)
+                if self._unlink(pair) and self._comp_of[pair[0]] == self._comp_of[pair[1]]:
+                    self._split(*pair)
+        moved, self._moved = self._moved, []
+        self._votes.sync(sorted(p for p, s in new.items() if s.viable), moved)
 
     def _rebuild(self, samples: Mapping[Point, StoredPose]) -> None:
         fresh = IncrementalGrouping(self.lattice)
@@ -163,6 +164,7 @@ class IncrementalGrouping:
         self._comp_of[p] = cid
         self._members[cid] = {p}
         self._sorted[cid] = [p]
+        self._votes.changed((cid,))
         if self.listener is not None:
             self.listener.on_new(cid, p)
 
@@ -178,6 +180,8 @@ class IncrementalGrouping:
             self._comp_of[x] = a
             insort(into, x)
         self._members[a] |= moved
+        self._moved += moved
+        self._votes.changed((a, b))
         if self.listener is not None:
             self.listener.on_join(a, b, moved)
 
@@ -212,6 +216,8 @@ class IncrementalGrouping:
         self._sorted[cid] = sorted(part)
         for x in part:
             self._comp_of[x] = cid
+        self._moved += part
+        self._votes.changed((old, cid))
         if self.listener is not None:
             self.listener.on_detach(old, cid, part)
 
@@ -220,47 +226,32 @@ class IncrementalGrouping:
         """The linked components before speck folding, each sorted, by their first point."""
         return sorted(self._sorted.values(), key=lambda c: c[0])
 
+    @property
+    def fold(self) -> dict[int, int]:
+        """speck → the component it is folded into, as of the last `update_fold` (shared:
+        callers must not change it)."""
+        return self._votes.fold
+
+    def update_fold(self) -> set[int]:
+        """Decide the specks again where the batches since the last call may have changed
+        them; returns the specks whose fold changed (and specks gone)."""
+        return self._votes.update()
+
     def components(self) -> list[list[Point]]:
-        """What `grouping.components(lattice, samples)` gives for every sample fed so far.
-        The lists are shared with the cache: callers must not change them."""
+        """What `grouping.components(lattice, samples)` gives for every sample fed so far
+        (`_merge_specks`'s output: components not merged are the cached lists, shared:
+        callers must not change them)."""
+        self.update_fold()
         raw = self.raw_components()
-        index = {id(c): i for i, c in enumerate(raw)}
-        comp_of, sorted_of = self._comp_of, self._sorted
-
-        def owner_of(q: Point) -> int | None:
-            cid = comp_of.get(q)
-            return None if cid is None else index[id(sorted_of[cid])]
-
-        # The specks' neighbour lists and tolerance tests, kept from one call to the next
-        # for the points still in specks (lattice geometry and stored results do not change).
-        old_nbrs, old_near = self._speck_nbrs, self._speck_near
-        nbrs: dict[Point, list[Point]] = {}
-        near_of: dict[Pair, bool] = {}
-
-        def neighbours_of(p: Point) -> list[Point]:
-            got = nbrs.get(p)
-            if got is None:
-                got = old_nbrs.get(p)
-                if got is None:
-                    got = speck_neighbours(self.lattice, p)
-                nbrs[p] = got
-            return got
-
-        def near(p: Point, q: Point) -> bool:
-            got = near_of.get((p, q))
-            if got is None:
-                got = old_near.get((p, q))
-                if got is None:
-                    got = same_behaviour(self.samples[p], self.samples[q], SPECK_TOLERANCE_RAD)
-                near_of[(p, q)] = got
-            return got
-
-        merged: dict[int, int] = {}
-        out = _merge_specks(self.lattice, self.samples, raw, owner_of, neighbours_of, near,
-                            merged)
-        self._speck_nbrs, self._speck_near = nbrs, near_of
-        self.fold = {comp_of[raw[i][0]]: comp_of[raw[j][0]] for i, j in merged.items()}
-        return out
+        fold = self.fold
+        if not fold:
+            return raw
+        parts: dict[int, list[list[Point]]] = {}
+        for c in raw:
+            cid = self._comp_of[c[0]]
+            parts.setdefault(fold.get(cid, cid), []).append(c)
+        return sorted((ps[0] if len(ps) == 1 else sorted(x for c in ps for x in c)
+                       for ps in parts.values()), key=lambda g: g[0])
 
     def comp_of(self, p: Point) -> int | None:
         return self._comp_of.get(p)

@@ -104,7 +104,7 @@ class RunningMap:
         self._touched: set[int] = set()
         self._moved: set[Point] = set()
         self.rescored: set[Point] = set()  # poses whose robust score the last batch changed
-        self._fold: dict[int, int] = {}
+        self._fold = self.g.fold  # speck → its main component, kept by the grouping
         # main component → (its components, volume m³, summary) as last written
         self._cache: dict[int, tuple[tuple[int, ...], float, ManifoldSummary]] = {}
         self.table = Table([], [], 0.0, 0.0)
@@ -173,10 +173,7 @@ class RunningMap:
             self.g.add(new.items())  # components: on_new, on_join, on_detach
             self._own(new)
             self._score(new)
-        self.g.components()
-        fold = self.g.fold
-        refolded = {c for c in fold.keys() | self._fold.keys() if fold.get(c) != self._fold.get(c)}
-        self._fold = dict(fold)
+        refolded = self.g.update_fold()  # the specks decided again (manifolds/specks.py)
         dirty = set(self._moved)
         for c in refolded:
             if c in self.comps:

@@ -9,11 +9,12 @@ import random
 import pytest
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.grouping import components
+from graspscape.services.coordinator.manifolds.grouping import components, speck_neighbours
 from graspscape.services.coordinator.manifolds.incremental import (
     GroupingCache,
     IncrementalGrouping,
 )
+from graspscape.services.coordinator.manifolds.specks import Neighbours
 from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
 
 GRIDS = {
@@ -171,3 +172,52 @@ def test_the_cache_feeds_what_is_new_and_starts_again_on_another_store() -> None
     assert cache.components("x", lattice, part) == components(lattice, part)
     assert cache.components("y", lattice, coarse) == components(lattice, coarse)
     assert list(cache._states) == ["y"]
+
+
+@pytest.mark.parametrize("name", ["60deg-2r-2rolls", "45deg-1r-2rolls"])
+def test_cached_neighbours_are_the_speck_neighbours(name: str) -> None:
+    """The vote state's neighbour lists (cached per direction cell) are `speck_neighbours`'s,
+    repeats and order included, at every point of a two-level lattice."""
+    lattice = Lattice(GRIDS[name], 2)
+    cached = Neighbours(lattice)
+    for p in finest_points(lattice):
+        assert cached(p) == speck_neighbours(lattice, p), p
+
+
+@pytest.mark.parametrize(("name", "seed"), [("60deg-2r-2rolls", 21), ("45deg-1r-2rolls", 22)])
+def test_refinement_after_the_coarse_pass_cuts_and_refolds(name: str, seed: int) -> None:
+    """The coarse pass first, then two levels of midpoints in shuffled tiles: every cut and
+    split (and the specks' votes moving with the points) leaves the full recompute's
+    components, and the refinement does split some components."""
+    lattice = Lattice(GRIDS[name], 2)
+    rng = random.Random(seed)
+    samples = sampled(lattice, rng, share=0.8)
+    state = IncrementalGrouping(lattice)
+    splits = Splits()
+    state.listener = splits
+    seen: dict[Point, StoredPose] = {}
+    for level in (0, 1, 2):
+        order = sorted(p for p in samples if lattice.birth(p) == level)
+        rng.shuffle(order)
+        step = max(7, len(order) // 6)
+        for i in range(0, len(order), step):
+            batch = [(p, samples[p]) for p in order[i : i + step]]
+            state.add(batch)
+            seen.update(batch)
+            assert state.components() == components(lattice, seen)
+    assert splits.n > 0
+
+
+class Splits:
+    """Counts the splits the grouping reports (its listener)."""
+
+    n = 0
+
+    def on_new(self, cid: int, p: Point) -> None:
+        pass
+
+    def on_join(self, into: int, gone: int, moved: set[Point]) -> None:
+        pass
+
+    def on_detach(self, old: int, new: int, part: set[Point]) -> None:
+        self.n += 1
