@@ -243,7 +243,8 @@ def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
         else None,
         max_effort_nm=max_effort_nm, limit=limit, rank=rank, coarser=coarser,
     )
-    evidence = ranking.robust_evidence(session, exploration_id, rows, coarser=coarser)
+    evidence = ranking.robust_evidence(session, exploration_id, rows, coarser=coarser,
+                                       lattice=lattice)
     poses = []
     for row, ev in zip(rows, evidence, strict=True):
         sc = ev.score

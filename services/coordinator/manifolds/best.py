@@ -14,9 +14,13 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from graspscape.services.coordinator.errors import NotFound
-from graspscape.services.coordinator.exploration.lattice import Lattice
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.exploration.samples import (
+    _SAMPLE_COLUMNS as SAMPLE_COLUMNS,
+)
 from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
 from graspscape.services.coordinator.exploration.specs import spec_of
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.robust import (
     Neighbourhoods,
     RobustLabel,
@@ -164,6 +168,26 @@ def _best_robust_coarser(session: Session, exploration_id: int, *, label: int | 
     return [by_key[samples[p].key] for p in ranked]
 
 
+# What a neighbour's part in a robust score needs (manifolds/robust.score: viability, μs, the
+# digits in contact from the signature, how it was obtained): not the grasp, the largest JSON.
+_EVIDENCE_COLUMNS = tuple(c for c in SAMPLE_COLUMNS if c.key != "grasp")
+
+
+def _samples_by_key(session: Session, exploration_id: int,
+                    point_of_key: dict[str, Point]) -> dict[Point, StoredPose]:
+    """The stored samples of the lattice points whose pose keys are given (key → point). A
+    row stored under a point's key is that point's pose (the key is made of the pose's
+    coordinates), so the point is looked up, not found again from the row (load_samples's
+    `point_or_none`, the same point)."""
+    out: dict[Point, StoredPose] = {}
+    wanted = sorted(point_of_key)
+    base = select(*_EVIDENCE_COLUMNS).where(PoseRow.exploration_id == exploration_id)
+    for i in range(0, len(wanted), _KEY_CHUNK):
+        for row in session.execute(base.where(PoseRow.pose_key.in_(wanted[i:i + _KEY_CHUNK]))):
+            out[point_of_key[row.pose_key]] = StoredPose.from_row(row)
+    return out
+
+
 @dataclass(frozen=True)
 class Evidence:
     """What backs a pose's robust score: its N_δ ∪ {p} at the δ asked for, and the evaluations
@@ -179,18 +203,19 @@ class Evidence:
 
 
 def robust_evidence(session: Session, exploration_id: int, rows: list[PoseRow], *,
-                    coarser: int = 0) -> list[Evidence]:
+                    coarser: int = 0, lattice: Lattice | None = None) -> list[Evidence]:
     """The robust score at δ and its evidence for each of a few poses (/best's answer): their
-    neighbourhoods read by key, not the whole exploration."""
+    neighbourhoods read by key, not the whole exploration (`lattice`: the exploration's, where
+    the caller has it)."""
     if not rows:
         return []
-    lattice = lattice_of_exploration(session, exploration_id)
+    lattice = lattice if lattice is not None else lattice_of_exploration(session, exploration_id)
     hood = Neighbourhoods(lattice, coarser)
     own = load_samples(session, exploration_id, lattice, [r.pose_key for r in rows])
     point_of = {s.key: p for p, s in own.items()}
     hoods = {p: hood(p) for p in own}
-    keys = {lattice.pose(q).key() for qs in hoods.values() for q in qs}
-    samples = {**load_samples(session, exploration_id, lattice, keys), **own}
+    point_of_key = {lattice.pose(q).key(): q for qs in hoods.values() for q in qs}
+    samples = {**_samples_by_key(session, exploration_id, point_of_key), **own}
     wanted = [r.pose_key for r in rows]
     cert: dict[str, list[bool]] = {}
     for i in range(0, len(wanted), _KEY_CHUNK):

@@ -126,3 +126,30 @@ def test_migration_0012_fills_the_volume_from_the_summary(tmp_path) -> None:
     with engine.begin() as c:
         assert c.execute(text("SELECT volume_cm3 FROM manifolds")).scalar() == 12.5
     engine.dispose()
+
+
+def test_evidence_samples_by_key_are_load_samples_without_the_grasp(client, object_id,
+                                                                    sessions) -> None:
+    """/best's evidence reads its neighbourhoods by key (manifolds/best._samples_by_key): the
+    samples load_samples finds for those points, the grasp left out."""
+    import dataclasses
+
+    from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
+    from graspscape.services.coordinator.exploration.specs import spec_of
+    from graspscape.services.coordinator.manifolds.best import _samples_by_key
+    from graspscape.services.coordinator.store.models import ExplorationRow
+
+    eid = client.post("/explorations", json={
+        "object_id": object_id, "gripper": "robotiq_3f", "grid": GRID,
+        "strategy": {"name": "grid"}, "refinement": {"levels": 0}}).json()["id"]
+    with sessions() as s:
+        while tiles := lease_tiles(s, worker_id="w", n=8, lease_seconds=60):
+            for t in tiles:
+                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                               results=[oracle_result(p) for p in t.poses()])
+        lattice = lattice_of(spec_of(s.get(ExplorationRow, eid)))
+        every = load_samples(s, eid, lattice)
+        assert len(every) > 20 and any(x.grasp for x in every.values())
+        points = sorted(every)[::3]
+        by_key = _samples_by_key(s, eid, {lattice.pose(p).key(): p for p in points})
+    assert by_key == {p: dataclasses.replace(every[p], grasp=None) for p in points}
