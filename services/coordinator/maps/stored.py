@@ -57,11 +57,13 @@ def store_default(session: Session, exploration_id: int) -> None:
     """Render the default picture at the current version and store it (the caller commits)."""
     from graspscape.services.coordinator.maps.picture import picture_bytes
 
+    # The stored one out first: drawn again, not read back (the process's memory may still
+    # hold this version's bytes: then they are the picture).
+    session.execute(delete(MapPictureRow).where(MapPictureRow.exploration_id == exploration_id))
     data, manifolds, poses = picture_bytes(session, exploration_id, "png",
                                            title=default_title(exploration_id))
     row = session.get(ExplorationRow, exploration_id)
     assert row is not None  # picture_bytes raised NotFound otherwise
-    session.execute(delete(MapPictureRow).where(MapPictureRow.exploration_id == exploration_id))
     session.add(MapPictureRow(exploration_id=exploration_id, version=version_text(row),
                               png=data, manifolds=manifolds, poses=poses))
 
