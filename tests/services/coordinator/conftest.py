@@ -4,6 +4,7 @@ preparation, as every `graspscape` command composes it (graspscape.services.loca
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -62,6 +63,20 @@ def named_object(sessions: sessionmaker[Session]):
     return make
 
 
+@contextlib.contextmanager
+def own_app(backend: str, directory: Path, sqlite_template: Path) -> Iterator[TestClient]:
+    """The app on a database of its own ("sqlite": a copy of the session's migrated template
+    in `directory`; "postgresql": a private schema migrated to head, dropped at the end), for
+    module-scoped fixtures whose tests share what they only read."""
+    urls = _sqlite(directory, sqlite_template) if backend == "sqlite" else _postgres()
+    url = next(urls)
+    try:
+        with TestClient(create_app(_settings(url, directory))) as client:
+            yield client
+    finally:
+        urls.close()
+
+
 @dataclass(frozen=True)
 class RefusalApi:
     """One app for a module's refusal tests, with an object and an exploration in place."""
@@ -82,17 +97,13 @@ def refusals(request: pytest.FixtureRequest,
     and one app for dozens of cases keeps the default suite short. Both backends still run,
     since a value the API let through could fail in one database only."""
     directory = tmp_path_factory.mktemp("refusals")
-    urls = _sqlite(directory) if request.param == "sqlite" else _postgres()
-    url = next(urls)
-    try:
-        with TestClient(create_app(_settings(url, directory))) as client:
-            response = client.post("/objects", data={"name": "sphere", "mass_kg": "0.2"})
-            assert response.status_code == 201, response.text
-            object_id = response.json()["id"]
-            response = client.post("/explorations", json={
-                "object_id": object_id, "gripper": "robotiq_3f",
-                "grid": {"dtheta": 0.6, "r_min": 0.0, "r_max": 0.02, "dr": 0.01}})
-            assert response.status_code == 201, response.text
-            yield RefusalApi(client, object_id, response.json()["id"])
-    finally:
-        urls.close()
+    template = request.getfixturevalue("sqlite_template")
+    with own_app(request.param, directory, template) as client:
+        response = client.post("/objects", data={"name": "sphere", "mass_kg": "0.2"})
+        assert response.status_code == 201, response.text
+        object_id = response.json()["id"]
+        response = client.post("/explorations", json={
+            "object_id": object_id, "gripper": "robotiq_3f",
+            "grid": {"dtheta": 0.6, "r_min": 0.0, "r_max": 0.02, "dr": 0.01}})
+        assert response.status_code == 201, response.text
+        yield RefusalApi(client, object_id, response.json()["id"])

@@ -7,6 +7,9 @@ import io
 import json
 import math
 import random
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import h5py
@@ -25,6 +28,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from tests.factories import fake_results
+from tests.services.coordinator.conftest import own_app
 
 GRID = {"dtheta": 0.6, "r_min": 0.0, "r_max": 0.02, "dr": 0.01}
 ATTITUDES = {"rolls": 2, "tilts": [0.3]}
@@ -47,18 +51,42 @@ def _turned(results: list[PoseResult], rng: random.Random) -> list[PoseResult]:
     return out
 
 
-@pytest.fixture
-def explored(client: TestClient, object_id: int, sessions: sessionmaker[Session]) -> int:
-    body = {"object_id": object_id, "gripper": "robotiq_3f",
-            "grid": {**GRID, "attitudes": ATTITUDES}}
-    response = client.post("/explorations", json=body)
-    assert response.status_code == 201, response.text
-    rng = random.Random(7)
-    with sessions() as s:
-        for t in lease_tiles(s, worker_id="w1", n=10_000, lease_seconds=60):
-            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w1",
-                           results=_turned(fake_results(t.poses(), seed=t.tile_id), rng))
-    return response.json()["id"]
+@dataclass(frozen=True)
+class Explored:
+    """An app on a database of its own holding one stored exploration."""
+
+    client: TestClient
+    id: int
+
+    @property
+    def sessions(self) -> sessionmaker[Session]:
+        return self.client.app.state.sessionmaker  # type: ignore[attr-defined]
+
+    @property
+    def url(self) -> str:
+        return self.client.app.state.settings.database.resolved_url  # type: ignore[attr-defined]
+
+
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def explored(request: pytest.FixtureRequest,
+             tmp_path_factory: pytest.TempPathFactory) -> Iterator[Explored]:
+    """Stored once per backend for the module (1.6 s a time): every test here only reads it."""
+    directory = tmp_path_factory.mktemp("exports")
+    template = request.getfixturevalue("sqlite_template")
+    with own_app(request.param, directory, template) as client:
+        response = client.post("/objects", data={"name": "sphere", "mass_kg": "0.2"})
+        assert response.status_code == 201, response.text
+        body = {"object_id": response.json()["id"], "gripper": "robotiq_3f",
+                "grid": {**GRID, "attitudes": ATTITUDES}}
+        response = client.post("/explorations", json=body)
+        assert response.status_code == 201, response.text
+        rng = random.Random(7)
+        with client.app.state.sessionmaker() as s:  # type: ignore[attr-defined]
+            for t in lease_tiles(s, worker_id="w1", n=10_000, lease_seconds=60):
+                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                               worker_id="w1",
+                               results=_turned(fake_results(t.poses(), seed=t.tile_id), rng))
+        yield Explored(client, response.json()["id"])
 
 
 def _stored(sessions: sessionmaker[Session], eid: int) -> list[PoseRow]:
@@ -107,14 +135,14 @@ def _mesh(sessions: sessionmaker[Session], eid: int) -> Any:
         return object_mesh(s, s.get(ExplorationRow, eid).object_id)
 
 
-def test_graspgen_round_trip(client: TestClient, explored: int,
-                             sessions: sessionmaker[Session]) -> None:
-    response = client.get(f"/explorations/{explored}/export/graspgen.json")
+def test_graspgen_round_trip(explored: Explored) -> None:
+    client, sessions = explored.client, explored.sessions
+    response = client.get(f"/explorations/{explored.id}/export/graspgen.json")
     assert response.status_code == 200, response.text
     assert response.headers["content-type"].startswith("application/json")
     data = json.loads(response.content)
-    rows = _stored(sessions, explored)
-    assert data["object"] == {"file": f"exploration-{explored}-object.obj", "scale": 1.0,
+    rows = _stored(sessions, explored.id)
+    assert data["object"] == {"file": f"exploration-{explored.id}-object.obj", "scale": 1.0,
                               "source": "sphere", "source_scale": 1.0, "mass": 0.2}
     assert data["gripper"] == {"name": "robotiq_3f"}
     # GraspGen's own reading: positives and negatives by the boolean mask.
@@ -124,21 +152,21 @@ def test_graspgen_round_trip(client: TestClient, explored: int,
     assert mask.tolist() == [bool(r.viable) for r in rows]
     assert 0 < len(grasps[mask]) < len(rows)
     assert data["graspscape"]["transform_from_grasp"] == [r.grasp is not None for r in rows]
-    _check_transforms(grasps, rows, _mesh(sessions, explored))
+    _check_transforms(grasps, rows, _mesh(sessions, explored.id))
 
 
-def test_acronym_round_trip(client: TestClient, explored: int,
-                            sessions: sessionmaker[Session]) -> None:
-    response = client.get(f"/explorations/{explored}/export/acronym.h5")
+def test_acronym_round_trip(explored: Explored) -> None:
+    client, sessions = explored.client, explored.sessions
+    response = client.get(f"/explorations/{explored.id}/export/acronym.h5")
     assert response.status_code == 200, response.text
     assert response.headers["content-type"] == "application/x-hdf5"
-    rows = _stored(sessions, explored)
-    mesh = _mesh(sessions, explored)
+    rows = _stored(sessions, explored.id)
+    mesh = _mesh(sessions, explored.id)
     with h5py.File(io.BytesIO(response.content), "r") as f:
         # ACRONYM's own reading (acronym_tools.load_grasps, load_mesh).
         transforms = np.array(f["grasps/transforms"])
         success = np.array(f["grasps/qualities/flex/object_in_gripper"])
-        assert f["object/file"][()].decode() == f"exploration-{explored}-object.obj"
+        assert f["object/file"][()].decode() == f"exploration-{explored.id}-object.obj"
         assert f["object/scale"][()] == 1.0 and f["object/mass"][()] == 0.2
         assert f["gripper/type"][()].decode() == f["gripper/name"][()].decode() == "robotiq_3f"
         assert success.tolist() == [int(r.viable) for r in rows]
@@ -157,21 +185,21 @@ def test_acronym_round_trip(client: TestClient, explored: int,
         _check_transforms(transforms, rows, mesh)
 
 
-def test_chunks_do_not_change_the_exports(client: TestClient, explored: int,
+def test_chunks_do_not_change_the_exports(explored: Explored,
                                           monkeypatch: pytest.MonkeyPatch) -> None:
-    whole = client.get(f"/explorations/{explored}/export/graspgen.json").content
+    client = explored.client
+    whole = client.get(f"/explorations/{explored.id}/export/graspgen.json").content
     monkeypatch.setattr(dataset_rows, "CHUNK_ROWS", 7)
-    assert client.get(f"/explorations/{explored}/export/graspgen.json").content == whole
+    assert client.get(f"/explorations/{explored.id}/export/graspgen.json").content == whole
 
 
 @pytest.mark.slow  # the command end to end, three formats, both databases
-def test_cli_writes_what_the_route_serves(client: TestClient, explored: int, db_url: str,
-                                          tmp_path: Any) -> None:
+def test_cli_writes_what_the_route_serves(explored: Explored, tmp_path: Path) -> None:
     for what in ("graspgen.json", "acronym.h5", "object.obj"):
         out = tmp_path / what
-        assert main(["map", "export", str(explored), "--what", what, "-o", str(out),
-                     "--database-url", db_url]) == 0
-        served = client.get(f"/explorations/{explored}/export/{what}").content
+        assert main(["map", "export", str(explored.id), "--what", what, "-o", str(out),
+                     "--database-url", explored.url]) == 0
+        served = explored.client.get(f"/explorations/{explored.id}/export/{what}").content
         if what == "acronym.h5":
             with h5py.File(out, "r") as a, h5py.File(io.BytesIO(served), "r") as b:
                 assert np.array_equal(a["grasps/transforms"], b["grasps/transforms"])
@@ -180,12 +208,13 @@ def test_cli_writes_what_the_route_serves(client: TestClient, explored: int, db_
     assert not list(tmp_path.glob("*.part"))
 
 
-def test_refusals(client: TestClient, explored: int, tmp_path: Any, db_url: str) -> None:
+def test_refusals(explored: Explored) -> None:
+    client = explored.client
     for what in ("graspgen.json", "acronym.h5", "object.obj"):
         assert client.get(f"/explorations/999999/export/{what}").status_code == 404
     use_mesh_source(None)  # a coordinator without the workers' object preparation
     try:
-        response = client.get(f"/explorations/{explored}/export/acronym.h5")
+        response = client.get(f"/explorations/{explored.id}/export/acronym.h5")
         assert response.status_code == 409 and "formed no grasp" in response.json()["detail"]
     finally:
         wire()
