@@ -28,6 +28,7 @@ every tile done). Writes benchmarks/results/fleet.json (or `--results NAME`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -148,7 +149,7 @@ def _accounting(url: str, eid: int) -> dict[str, int]:
 
 
 def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
-        via_router: bool) -> dict[str, float]:
+        via_router: bool, log: Path | None = None) -> dict[str, float]:
     url, schema = _schema_url()
     try:
         target = max(20 * TILE_POSES, int(n / pose_s * seconds))
@@ -168,13 +169,17 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
             zenoh_args = ["--zenoh-mode", "client", "--zenoh-connect", endpoint]
         else:
             zenoh_args = ["--zenoh-listen", endpoint]
-        with tempfile.TemporaryDirectory() as tmp:
+        with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as logs:
+            # --coordinator-log: its log at info level (the orphan sweep's and requeues'
+            # lines), per N; otherwise warnings, discarded.
+            sink = (logs.enter_context(open(f"{log}.n{n}", "w")) if log is not None
+                    else subprocess.DEVNULL)
             coordinator = subprocess.Popen(
                 [sys.executable, "-m", "graspscape.services.local.cli", "serve",
                  "--database-url", url, "--port", str(port), "--no-migrate",
-                 "--log-level", "warning", *zenoh_args],
+                 "--log-level", "info" if log is not None else "warning", *zenoh_args],
                 cwd=REPO, env={**os.environ, "GRASPSCAPE_DATABASE__DATA_DIR": tmp},
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                stdout=sink, stderr=sink)
             _wait_http(port, coordinator)
             fleet, outs = [], []
             for first in range(0, n, per_proc):
@@ -318,13 +323,15 @@ def main() -> int:
     parser.add_argument("--via-router", action="store_true",
                         help="workers and coordinator connect to a zenoh router (its own "
                         "process) instead of the coordinator's embedded peer")
+    parser.add_argument("--coordinator-log", type=Path, default=None,
+                        help="the coordinator's log at info level into PATH.n<N>")
     parser.add_argument("--results", default="fleet",
                         help="results file name, benchmarks/results/<name>.json")
     args = parser.parse_args()
     figures: dict[str, float] = {"load_avg_1min_start": round(os.getloadavg()[0], 2)}
     for n in (int(x) for x in args.workers.split(",")):
         got = run(n, per_proc=args.per_proc, pose_s=args.pose_s, seconds=args.seconds,
-                  timeout=args.timeout, via_router=args.via_router)
+                  timeout=args.timeout, via_router=args.via_router, log=args.coordinator_log)
         print(json.dumps(got), flush=True)
         figures.update(got)
         figures[f"load_avg_1min_after_n{n}"] = round(os.getloadavg()[0], 2)
