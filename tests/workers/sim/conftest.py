@@ -19,12 +19,19 @@ def sim_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def make_evaluator(sim_cache: Path):
+def object_cache(sim_cache: Path) -> Path:
+    """The one object cache of the simulation tests: an object is prepared (V-HACD for the
+    pybullet meshes, ~1 s each) once per session whichever module asks first."""
+    return sim_cache / "objects"
+
+
+@pytest.fixture(scope="session")
+def make_evaluator(sim_cache: Path, object_cache: Path):
     made: list[Evaluator] = []
 
     def make(name: str, gripper: str = "robotiq_3f", settings: SimSettings | None = None,
              world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Evaluator:
-        prepared = prepare_object(ObjectSpec(name=name), sim_cache / "objects")
+        prepared = prepare_object(ObjectSpec(name=name), object_cache)
         evaluator = Evaluator(prepared, load_gripper(gripper), settings, work_dir=sim_cache,
                               world_offset=world_offset)
         made.append(evaluator)

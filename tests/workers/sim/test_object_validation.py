@@ -33,8 +33,8 @@ needs_ycb = pytest.mark.skipif(not ycb_root().is_dir(), reason="YCB folder not p
 
 
 @pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tmp_path_factory.mktemp("object-cache")
+def cache_dir(object_cache: Path) -> Path:
+    return object_cache
 
 
 def _file(tmp_path: Path, name: str, data: bytes) -> str:
