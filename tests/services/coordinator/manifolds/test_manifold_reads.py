@@ -27,14 +27,10 @@ GRID = {"dtheta": math.radians(30), "r_min": 0.0, "r_max": 0.02, "dr": 0.01,
 
 
 def test_manifold_reads_are_the_stored_summaries(client, object_id, sessions) -> None:
-    eid = client.post("/explorations", json={
-        "object_id": object_id, "gripper": "robotiq_3f", "grid": GRID,
-        "strategy": {"name": "grid"}, "refinement": {"levels": 0}}).json()["id"]
-    with sessions() as s:
-        while tiles := lease_tiles(s, worker_id="w", n=8, lease_seconds=60):
-            for t in tiles:
-                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
-                               results=[oracle_result(p) for p in t.poses()])
+    """One exploration (the default suite's budget) for: the answers kept per map version
+    (`_kept_per_version`), /best's evidence samples (`_evidence_samples`), and the lists."""
+    eid = _kept_per_version(client, object_id, sessions)
+    _evidence_samples(sessions, eid)
     listed = client.get(f"/explorations/{eid}/manifolds")
     assert listed.status_code == 200 and listed.headers["content-type"] == "application/json"
     got = ManifoldList.model_validate(listed.json())
@@ -63,10 +59,11 @@ def test_manifold_reads_are_the_stored_summaries(client, object_id, sessions) ->
     assert client.get("/explorations/999999/manifolds/A").status_code == 404
 
 
-def test_read_answers_are_kept_per_map_version(client, object_id, sessions) -> None:
+def _kept_per_version(client, object_id, sessions) -> int:  # type: ignore[no-untyped-def]
     """/best, /manifolds and /manifolds/A are kept per map version (api/answers.py): the
     same bytes while no pose arrives, the new map's answer once results are ingested (the
-    version moves with them), and a kept answer is what computing it again gives."""
+    version moves with them), and a kept answer is what computing it again gives. Returns the
+    exploration, every tile ingested."""
     eid = client.post("/explorations", json={
         "object_id": object_id, "gripper": "robotiq_3f", "grid": GRID,
         "strategy": {"name": "grid"}, "refinement": {"levels": 0}}).json()["id"]
@@ -107,6 +104,7 @@ def test_read_answers_are_kept_per_map_version(client, object_id, sessions) -> N
             > sum(m["pose_count"] for m in listed[1]["manifolds"]))
     answers.clear()
     assert read() == after
+    return eid
 
 
 def test_migration_0012_fills_the_volume_from_the_summary(tmp_path) -> None:
@@ -128,8 +126,7 @@ def test_migration_0012_fills_the_volume_from_the_summary(tmp_path) -> None:
     engine.dispose()
 
 
-def test_evidence_samples_by_key_are_load_samples_without_the_grasp(client, object_id,
-                                                                    sessions) -> None:
+def _evidence_samples(sessions, eid: int) -> None:  # type: ignore[no-untyped-def]
     """/best's evidence reads its neighbourhoods by key (manifolds/best._samples_by_key): the
     samples load_samples finds for those points, the grasp left out."""
     import dataclasses
@@ -139,14 +136,7 @@ def test_evidence_samples_by_key_are_load_samples_without_the_grasp(client, obje
     from graspscape.services.coordinator.manifolds.best import _samples_by_key
     from graspscape.services.coordinator.store.models import ExplorationRow
 
-    eid = client.post("/explorations", json={
-        "object_id": object_id, "gripper": "robotiq_3f", "grid": GRID,
-        "strategy": {"name": "grid"}, "refinement": {"levels": 0}}).json()["id"]
     with sessions() as s:
-        while tiles := lease_tiles(s, worker_id="w", n=8, lease_seconds=60):
-            for t in tiles:
-                ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
-                               results=[oracle_result(p) for p in t.poses()])
         lattice = lattice_of(spec_of(s.get(ExplorationRow, eid)))
         every = load_samples(s, eid, lattice)
         assert len(every) > 20 and any(x.grasp for x in every.values())
