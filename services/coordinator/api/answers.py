@@ -12,8 +12,9 @@ exploration's version never moves again: its reads become one indexed row read a
 look-up. The version is read after `ensure_manifolds` (which may refresh and commit), so an
 answer is never filed under a stale table's version.
 
-Per process, in memory, bounded (least recently used out). Entries are response bodies
-(bytes), never objects a caller could change.
+Per process, in memory, bounded by count and by bytes (a `/best?limit=100` answer with its
+poses' signatures and grasps is a few hundred kB), least recently used out. Entries are
+response bodies (bytes), never objects a caller could change.
 """
 
 from __future__ import annotations
@@ -29,8 +30,10 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 CACHED_ANSWERS = 512
+CACHED_BYTES = 32 * 2**20
 _lock = threading.Lock()
 _answers: OrderedDict[Hashable, bytes] = OrderedDict()
+_held = [0]  # bytes held by _answers
 _VERSION = select(
     ExplorationRow.created_at, ExplorationRow.updated_at, ExplorationRow.status,
     ExplorationRow.poses_done, ExplorationRow.manifolds_poses_done,
@@ -56,9 +59,11 @@ def answer(key: Hashable, compute: Callable[[], bytes]) -> bytes:
             return body
     body = compute()
     with _lock:
-        _answers[key] = body
-        while len(_answers) > CACHED_ANSWERS:
-            _answers.popitem(last=False)
+        if key not in _answers:
+            _answers[key] = body
+            _held[0] += len(body)
+        while _answers and (len(_answers) > CACHED_ANSWERS or _held[0] > CACHED_BYTES):
+            _held[0] -= len(_answers.popitem(last=False)[1])
     return body
 
 
@@ -66,3 +71,4 @@ def clear() -> None:
     """Forget every answer (tests that compare a computed answer with a kept one)."""
     with _lock:
         _answers.clear()
+        _held[0] = 0

@@ -143,3 +143,25 @@ def _evidence_samples(sessions, eid: int) -> None:  # type: ignore[no-untyped-de
         points = sorted(every)[::3]
         by_key = _samples_by_key(s, eid, {lattice.pose(p).key(): p for p in points})
     assert by_key == {p: dataclasses.replace(every[p], grasp=None) for p in points}
+
+
+def test_kept_answers_are_bounded_by_count_and_bytes(monkeypatch) -> None:
+    """Least recently used out, beyond CACHED_ANSWERS answers or CACHED_BYTES bytes; an
+    answer is computed once while kept."""
+    monkeypatch.setattr(answers, "CACHED_ANSWERS", 3)
+    monkeypatch.setattr(answers, "CACHED_BYTES", 100)
+    answers.clear()
+    calls: list[int] = []
+
+    def body(i: int, size: int = 30) -> bytes:
+        calls.append(i)
+        return bytes([i]) * size
+
+    for i in range(4):
+        assert answers.answer(i, lambda i=i: body(i)) == bytes([i]) * 30
+    assert answers.answer(3, lambda: body(99)) == bytes([3]) * 30  # kept: not computed
+    assert calls == [0, 1, 2, 3]
+    assert answers.answer(0, lambda: body(0)) and calls[-1] == 0  # out by count: computed
+    assert answers.answer(9, lambda: body(9, 90)) == bytes([9]) * 90  # answered, and alone
+    assert answers.answer(3, lambda: body(3)) and calls[-1] == 3  # out by bytes
+    answers.clear()
