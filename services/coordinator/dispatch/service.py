@@ -6,10 +6,10 @@ so the final reply goes out as soon as the answer is complete. Two pools, two qu
 batches (ingest: a transaction that waits its turn at the exploration's row lock) and leases
 with object fetches (one short transaction each), so a lease never queues behind a batch's
 commit; leasing stays safe against the ingest threads and other coordinators by the store's
-own means (SKIP LOCKED, lease epochs, lease-owner checks) (the store work of each answer
-is dispatch/answers.py's). Nothing raised while serving a
-query escapes: bad input gets an error reply, store failures an "unavailable" reply the
-worker retries, and both are logged and counted.
+own means (SKIP LOCKED, lease epochs, lease-owner checks; each answer's store work is
+dispatch/answers.py's). Nothing raised while serving a query escapes: bad input gets an
+error reply, store failures an "unavailable" reply the worker retries, both counted; a store
+outage is logged once per episode (dispatch/outage.py), anything else with its traceback.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import queue
 import shutil
 import tempfile
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -365,33 +366,32 @@ class Dispatcher:
                 if worker_id:
                     found.add(worker_id)
 
-        # A callback, not the default reply channel: a client session learns the tokens from
-        # its router and answers the query in place, pushing every reply into the handler
-        # before get() returns and under the session's lock. The default channel is bounded
-        # (256): with more workers than that, get() waited for a reader that runs only after
+        # A callback, not the bounded (256) default channel: a client session answers the query
+        # in place, into the handler, before get() returns and under the session's lock; with
+        # more workers than the channel holds, get() waited for a reader that runs only after
         # it returns, and the session's network thread for the lock (the whole session hung).
+        start = time.monotonic()
         self._session.liveliness().get(
             keys.ALIVE_ALL, zenoh.handlers.Callback(collect, done.set), timeout=timeout_s)
-        if not done.wait(timeout_s + 5.0):
-            return None  # not answered in time: asked again later, never half an answer
+        # Never half an answer (live workers' leases would go back): not one cut by its timeout.
+        if not done.wait(timeout_s + 5.0) or time.monotonic() - start >= timeout_s:
+            return None
         return found
 
     def _orphan_sweep(self) -> None:
-        # Workers that died while this coordinator was down left leases that no liveliness
-        # DELETE will ever announce. After a grace period, in which live workers reconnect
-        # and show their tokens, leases of owners without a token go back to the queue.
+        # Leases of workers that died while this coordinator was down (no DELETE will come):
+        # after a grace period to reconnect, those of owners without a token are requeued.
         if self._stopping.wait(self.zenoh_settings.orphan_grace_s):
             return
         try:
-            alive = self.alive_workers()
+            alive = self.alive_workers(timeout_s=5.0)  # a loaded router answers late
             if alive is None:
                 return
             with self._store_turn, self.sessions() as session:
                 if not lease_owners(session) - alive:
                     return
-                requeued, failed = requeue_lost(
-                    session, alive=alive, max_attempts=self.settings.queue.max_attempts
-                )
+                requeued, failed = requeue_lost(session, alive=alive,
+                                                max_attempts=self.settings.queue.max_attempts)
             self.counters.tiles_requeued.labels("orphaned").inc(requeued)
             log.info("leases of workers gone since before start: %d tiles queued again, "
                      "%d failed", requeued, failed)
