@@ -9,6 +9,7 @@ from collections.abc import Callable
 from datetime import timedelta
 
 import graspscape.services.coordinator.exploration.scheduler as scheduler_module
+import graspscape.services.coordinator.store.tiles as tiles_module
 import pytest
 from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
@@ -562,3 +563,35 @@ def test_threads_ingesting_halves_and_repeats_of_one_exploration_keep_counters_e
     assert rows == sum(len(t.poses()) for t in leased) == row.poses_done == row.poses_total
     assert row.viable_count == viable
     assert undone == 0 and row.status == "done"
+
+
+def test_a_coordinator_killed_before_the_counter_update_leaves_nothing_and_a_resend_counts_once(
+    sessions: sessionmaker[Session], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Killed after the insert and the tile's move, before the counters (the statements that
+    run outside the exploration's row lock): its connection goes without a commit, so
+    nothing of the batch is left; the worker's resend is stored and counted once."""
+    with sessions() as s:
+        eid = make_exploration(s)
+        (t,) = lease_tiles(s, worker_id="w", n=1, lease_seconds=600)
+    results = fake_results(t.poses(), seed=t.tile_id)
+    finish = tiles_module.finish
+
+    def killed(session: Session, **kwargs: object) -> bool:
+        assert finish(session, **kwargs)  # type: ignore[arg-type]
+        session.connection().invalidate()  # the process is gone: its connection with it
+        raise ConnectionError("killed")
+
+    monkeypatch.setattr(tiles_module, "finish", killed)
+    with sessions() as s, pytest.raises(ConnectionError):
+        ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                       results=results)
+    with sessions() as s:
+        assert pose_count(s, eid) == 0 and exploration(s, eid).poses_done == 0
+        assert s.get(TileRow, t.tile_id).state == "leased"  # type: ignore[union-attr]
+    monkeypatch.setattr(tiles_module, "finish", finish)
+    with sessions() as s:
+        report = ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                                worker_id="w", results=results)
+        assert report.inserted == len(results) and report.tile_moved
+        assert pose_count(s, eid) == exploration(s, eid).poses_done == len(results)
