@@ -12,6 +12,8 @@ ingest threads have, store the tiles of one exploration at once, the results mad
 tiles leased before the clock starts: wall-clock poses/s of the K together. That is where the
 exploration row's lock (store/ingest.py) makes ingests take turns; `--own-explorations` gives
 each thread an exploration of its own, the same work without that lock, to compare.
+`--baseline REF` adds an interleaved A/B of that K-thread run on PostgreSQL: store/ingest.py
+as it was at git REF against today's, `--rounds` times each (medians in the results).
 """
 
 from __future__ import annotations
@@ -20,10 +22,13 @@ import argparse
 import contextlib
 import os
 import queue
+import statistics
+import subprocess
 import sys
 import tempfile
 import threading
 import time
+import types
 import uuid
 from pathlib import Path
 from typing import Any
@@ -33,6 +38,7 @@ import psycopg
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
 
+import graspscape.services.coordinator.exploration.scheduler as scheduler_module  # noqa: E402
 from graspscape.services.coordinator import db  # noqa: E402
 from graspscape.services.coordinator.exploration.scheduler import ingest_results  # noqa: E402
 from graspscape.services.coordinator.exploration.service import create_exploration  # noqa: E402
@@ -147,6 +153,39 @@ def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
     return {"poses": poses, "batches": batches, "seconds": busy, "poses_per_s": poses / busy}
 
 
+def _store_batch_at(ref: str) -> Any:
+    """store_batch as store/ingest.py was at git `ref`, loaded beside today's modules (which
+    it imports), for an A/B in one process."""
+    source = subprocess.run(["git", "show", f"{ref}:services/coordinator/store/ingest.py"],
+                            cwd=REPO, check=True, capture_output=True, text=True).stdout
+    module = types.ModuleType(f"ingest_at_{ref}")
+    sys.modules[module.__name__] = module  # pydantic resolves the models' annotations there
+    exec(compile(source, f"ingest.py@{ref}", "exec"), module.__dict__)
+    return module.store_batch
+
+
+def ab_rounds(pg_url: str, *, baseline: str, rounds: int, threads: int, seconds: float,
+              batch: int) -> dict[str, float]:
+    """Interleaved rounds of the same K-thread ingest into one exploration on PostgreSQL with
+    the store_batch of `baseline` and with today's: median poses/s of each."""
+    current = scheduler_module.store_batch
+    before = _store_batch_at(baseline)
+    got: dict[str, list[float]] = {"baseline": [], "current": []}
+    try:
+        for _ in range(rounds):
+            for name, store_batch in (("baseline", before), ("current", current)):
+                scheduler_module.store_batch = store_batch
+                with _pg_schema(pg_url) as url:
+                    rate = run_threads(url, seconds=seconds, batch=batch, threads=threads,
+                                       own_explorations=False)["poses_per_s"]
+                print(f"A/B {name}: {rate:.0f} poses/s", flush=True)
+                got[name].append(rate)
+    finally:
+        scheduler_module.store_batch = current
+    return {f"ab_postgres_{threads}_threads_{name}_median_poses_per_s":
+            round(statistics.median(rates)) for name, rates in got.items()}
+
+
 def _pg_schema(pg_url: str):
     """A fresh schema for one PostgreSQL run, dropped after it."""
     schema = f"bench_ingest_{uuid.uuid4().hex[:8]}"
@@ -175,6 +214,10 @@ def main() -> int:
                         help="the K threads each into an exploration of its own")
     parser.add_argument("--backends", default="sqlite,postgresql")
     parser.add_argument("--no-write", action="store_true", help="print, write no results file")
+    parser.add_argument("--baseline", metavar="REF",
+                        help="also an A/B on PostgreSQL with --threads threads: store_batch of "
+                        "git REF against today's, interleaved")
+    parser.add_argument("--rounds", type=int, default=3, help="A/B rounds (each one of both)")
     parser.add_argument("--pg-url", default=PG_URL)
     args = parser.parse_args()
     backends = args.backends.split(",")
@@ -199,6 +242,9 @@ def main() -> int:
                            f"_{threads}_threads_{label}")
             print(f"{backend} x{threads}: {got}", flush=True)
             figures[key] = round(got["poses_per_s"])
+    if args.baseline:
+        figures.update(ab_rounds(args.pg_url, baseline=args.baseline, rounds=args.rounds,
+                                 threads=args.threads, seconds=args.seconds, batch=args.batch))
     figures["load_average_1min_end"] = round(os.getloadavg()[0], 1)
     if not args.no_write:
         write_results("ingest", figures)
