@@ -27,12 +27,17 @@ import argparse
 import math
 import os
 import random
+import shutil
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import components
+from graspscape.services.coordinator.manifolds.live import MapState
 from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.service import radius_function
 from graspscape.services.coordinator.manifolds.summary import build_map
@@ -106,7 +111,27 @@ def measure(dtheta_deg: float, rolls: int, tiles: int) -> dict[str, float]:
         running.add({p: samples[p] for p in order[i : i + TILE]})
         per_tile.append(time.process_time() - t)
     assert running.table.manifolds == full.manifolds, "the running table differs"
+    # Cold start: the map saved to disk and read back (manifolds/snapshot.py), against
+    # feeding it every pose again (running_feed_whole_map).
+    folder = Path(tempfile.mkdtemp(prefix="gs-snap-"))
+    state = MapState(running, last_id=n, rows=n)
+    wall, t = time.perf_counter(), time.process_time()
+    min_rows, snapshot.MIN_ROWS = snapshot.MIN_ROWS, 0  # saved whatever the map's size
+    assert snapshot.maybe_save(folder, "bench", state, final=True)
+    snapshot.MIN_ROWS = min_rows
+    save_cpu, save_wall = time.process_time() - t, time.perf_counter() - wall
+    size = sum(f.stat().st_size for f in folder.iterdir())
+    wall, t = time.perf_counter(), time.process_time()
+    loaded = snapshot.load(folder, "bench")
+    load_cpu, load_wall = time.process_time() - t, time.perf_counter() - wall
+    assert loaded is not None and loaded.running.table.manifolds == full.manifolds
+    shutil.rmtree(folder)
     return {
+        f"snapshot_save_cpu_s_{n}": round(save_cpu, 2),
+        f"snapshot_save_wall_s_{n}": round(save_wall, 2),
+        f"snapshot_load_cpu_s_{n}": round(load_cpu, 2),
+        f"snapshot_load_wall_s_{n}": round(load_wall, 2),
+        f"snapshot_mb_{n}": round(size / 1e6, 1),
         f"poses_{n}": n,
         f"manifolds_{n}": len(full.manifolds),
         f"full_grouping_cpu_s_{n}": round(grouping_s, 3),
@@ -120,8 +145,6 @@ def measure(dtheta_deg: float, rolls: int, tiles: int) -> dict[str, float]:
 def measure_store(figures: dict[str, float], dtheta: float = 0.056,
                   marks: tuple[int, ...] = (10_000, 50_000), cold_up_to: int = 20_000) -> None:
     import sys
-    import tempfile
-    from pathlib import Path
 
     from graspscape.services.coordinator import db
     from graspscape.services.coordinator.exploration.scheduler import ingest_results
@@ -134,7 +157,20 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from tests.factories import oracle_result
 
-    url = f"sqlite:///{tempfile.mkdtemp(prefix='gs-incr-')}/bench.db"
+    folder = tempfile.mkdtemp(prefix="gs-incr-")
+    url = f"sqlite:///{folder}/bench.db"
+    os.environ[snapshot.ENV] = f"{folder}/maps"  # snapshots saved as a coordinator saves them
+    load = snapshot.load
+    load_cpu: list[float] = []
+
+    def timed_load(*args):  # type: ignore[no-untyped-def]
+        t = time.process_time()
+        got = load(*args)
+        load_cpu.append(time.process_time() - t)
+        return got
+
+    snapshot.load = timed_load
+    save = snapshot.maybe_save
     db.upgrade(url, "head")
     sessions = db.make_sessionmaker(db.make_engine(url))
     grid = PoseGridSpec(dtheta=dtheta, r_min=0.0, r_max=0.05, dr=0.01,
@@ -170,14 +206,23 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
             s.commit()
             poses += ingest(tiles[k + 1])  # one more tile, then its refresh
             timed = {}
-            for mode in ("running", "cold") if poses <= cold_up_to else ("running",):
-                if mode == "cold":
+            modes = ("running", "snapshot", "cold") if poses <= cold_up_to \
+                else ("running", "snapshot")
+            for mode in modes:
+                if mode != "running":  # a restart: the process's maps are gone
                     service.MAPS.clear()
+                    load_cpu.clear()
+                if mode == "cold":  # and no snapshot either (none read, none written)
+                    shutil.rmtree(f"{folder}/maps", ignore_errors=True)
+                    snapshot.maybe_save = lambda *a, **k: False
                 t = time.process_time()  # SQLite runs in this process: its work counts
                 wall = time.perf_counter()
                 service.refresh_manifolds(s, eid)
                 s.commit()
                 timed[mode] = (time.process_time() - t, time.perf_counter() - wall)
+                snapshot.maybe_save = save
+                if mode == "snapshot" and load_cpu:
+                    figures[f"store_snapshot_load_cpu_s_{poses}poses"] = round(load_cpu[0], 3)
             for mode, (cpu, wall) in timed.items():
                 figures[f"store_refresh_cpu_s_{mode}_{poses}poses"] = round(cpu, 3)
                 figures[f"store_refresh_wall_s_{mode}_{poses}poses"] = round(wall, 3)

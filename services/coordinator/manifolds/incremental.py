@@ -69,6 +69,7 @@ class IncrementalGrouping:
         self.listener: Listener | None = None
         self._votes = SpeckVotes(lattice, self.samples, self._comp_of, self._members,
                                  self.first)
+        self.neighbours = self._votes.neighbours  # `grouping.speck_neighbours`, cached
         self._moved: list[Point] = []  # points that changed component in this batch
 
     def __len__(self) -> int:

@@ -47,6 +47,7 @@ class MapState:
     rows_of: dict[int, tuple[int, ManifoldSummary]] = field(default_factory=dict)
     dirty: set[Point] = field(default_factory=set)  # manifold may have changed since
     rescored: set[Point] = field(default_factory=set)  # robust score changed since
+    saved_rows: int = 0  # rows read when last saved to disk (manifolds/snapshot.py)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
 
@@ -58,11 +59,13 @@ class MapCache:
         self._states: dict[Hashable, MapState] = {}
         self._lock = threading.Lock()
 
-    def get(self, key: Hashable, make: Callable[[], RunningMap]) -> MapState:
+    def get(self, key: Hashable, make: Callable[[], RunningMap],
+            saved: Callable[[], MapState | None] = lambda: None) -> MapState:
+        """The key's state: kept, else `saved()` (a snapshot), else a new map."""
         with self._lock:
             state = self._states.pop(key, None)
             if state is None:
-                state = MapState(make())
+                state = saved() or MapState(make())
             self._states[key] = state
             while len(self._states) > self.size:
                 del self._states[next(iter(self._states))]

@@ -24,6 +24,7 @@ from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.samples import lattice_of
 from graspscape.services.coordinator.exploration.specs import spec_of
+from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
     FALLBACK_RADIUS,
@@ -122,8 +123,10 @@ def _state(session: Session, exploration_id: int
         return RunningMap(lattice, radius_function(object_mesh(session, object_id)),
                           maxima_per_manifold=spec.refinement.local_search_starts)
 
-    key = (str(session.get_bind().url), exploration_id, row.created_at)
-    return row, MAPS.get(key, fresh), fresh
+    url = str(session.get_bind().url)
+    key = (url, exploration_id, row.created_at)
+    folder = snapshot.directory(url)
+    return row, MAPS.get(key, fresh, lambda: snapshot.load(folder, key)), fresh
 
 
 def compute_map(
@@ -160,6 +163,10 @@ def refresh_manifolds(
     with state.lock:
         update_state(session, exploration_id, state, fresh)
         write(session, exploration_id, state, final=final)
+        # On disk every SAVE_GROWTH of growth, so that a restart does not rebuild it.
+        url = str(session.get_bind().url)
+        snapshot.maybe_save(snapshot.directory(url), (url, exploration_id, row.created_at),
+                            state, final=final)
     return ComputedMap(spec_of(row), state.running, object_mesh(session, row.object_id))
 
 

@@ -93,3 +93,68 @@ def test_a_table_written_by_another_process_is_written_whole(sessions, named_obj
         assert all(m is not None for k, m, *_ in after[1]
                    if s.scalar(select(PoseRow.viable).where(PoseRow.pose_key == k,
                                                             PoseRow.exploration_id == eid)))
+
+
+def test_a_restart_loads_the_saved_map_and_reads_only_the_rows_since(
+        sessions, named_object, monkeypatch, tmp_path) -> None:
+    from graspscape.services.coordinator.manifolds import snapshot
+
+    monkeypatch.setenv(snapshot.ENV, str(tmp_path))
+    monkeypatch.setattr(snapshot, "MIN_ROWS", 1)  # this map is small: save it anyway
+    spec = ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
+                           strategy={"name": "grid"}, refinement={"levels": 0},
+                           grid={"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02,
+                                 "dr": 0.01, "attitudes": {"rolls": 2}})
+    loaded: list = []
+    load = snapshot.load
+    monkeypatch.setattr(snapshot, "load", lambda *a: loaded.append(
+        (got := load(*a), got and got.running, got and got.rows)) or got)
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=16, max_poses=10**6).id
+        tiles = []
+        while leased := lease_tiles(s, worker_id="w", n=50, lease_seconds=60):
+            tiles += leased
+
+        def ingest(t) -> None:  # type: ignore[no-untyped-def]
+            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                           results=[oracle_result(p) for p in t.poses()])
+
+        for n, t in enumerate(tiles[:-1]):
+            ingest(t)
+            if n in (len(tiles) // 2, len(tiles) - 2):  # saved at both: it grew by > 1.2
+                service.refresh_manifolds(s, eid)
+            s.commit()
+        saved = list(tmp_path.iterdir())
+        assert len(saved) == 1
+        service.MAPS.clear()  # a restart
+        ingest(tiles[-1])
+        service.refresh_manifolds(s, eid, final=True)
+        s.commit()
+        state, running, rows = loaded[-1]
+        # Loaded, then fed only the last tile's rows (a rebuild would replace the map).
+        assert state is not None and state.running is running
+        assert rows < state.rows == s.get(ExplorationRow, eid).poses_done
+        after = stored(s, eid)
+        # The same store as a map rebuilt from every row writes, whole.
+        service.MAPS.clear()
+        saved[0].unlink()
+        s.get(ExplorationRow, eid).manifolds_poses_done = None
+        s.commit()
+        service.refresh_manifolds(s, eid, final=True)
+        s.commit()
+        assert loaded[-1][0] is None
+        assert stored(s, eid) == after
+
+
+def test_a_snapshot_of_another_exploration_or_format_is_not_used(tmp_path) -> None:
+    from graspscape.services.coordinator.manifolds import snapshot
+
+    (tmp_path / "x").mkdir()
+    assert snapshot.directory("sqlite:////data/c.db") == snapshot.Path("/data/c.db.manifold-maps")
+    path = snapshot._path(tmp_path, ("u", 1, "t"))
+    path.write_bytes(b"not a pickle")
+    assert snapshot.load(tmp_path, ("u", 1, "t")) is None
+    import pickle
+
+    path.write_bytes(pickle.dumps({"format": snapshot.FORMAT, "key": repr(("u", 2, "t"))}))
+    assert snapshot.load(tmp_path, ("u", 1, "t")) is None
