@@ -1,7 +1,7 @@
 """The exploration scheduler: record a batch of results and ask the strategy what comes next.
 
 One transaction per batch: the store takes the batch (store/ingest.py: lease check,
-idempotent insert, counters, the tile finished), then the exploration's strategy
+idempotent insert, the tile finished, then the counters), then the exploration's strategy
 (`ExplorationSpec.strategy`, exploration/strategies/) decides from what is stored now which
 poses to evaluate next, and they are planned and queued (exploration/planning.py), all
 before the commit. The counter update takes the exploration row's lock, held to the commit,

@@ -208,11 +208,12 @@ _FINISH_EXPLORATIONS = (
 
 def lock_explorations(session: Session, exploration_ids: Iterable[int]) -> None:
     """Row locks on explorations (in id order), held to the commit, before any tile of theirs
-    changes state. Ingest, failure and requeue all take them first, so they never wait on each
-    other in opposite orders, and the finish check that follows reads the others' tiles as
-    committed (on PostgreSQL each statement reads what was committed when it started; a
-    statement that waited on the row lock would still read the tiles from before). SQLite's
-    write lock serializes these transactions anyway; it renders no FOR UPDATE."""
+    changes state. Failure and requeue take them first; ingest takes a key-share lock on the
+    row first (store/ingest.py) and the exclusive one last, with its counter update, so none of
+    them waits on another in the opposite order, and the finish check that follows reads the
+    others' tiles as committed (on PostgreSQL each statement reads what was committed when it
+    started; a statement that waited on the row lock would still read the tiles from before).
+    SQLite's write lock serializes these transactions anyway; it renders no FOR UPDATE."""
     ids = sorted(set(exploration_ids))
     if ids:
         session.execute(select(ExplorationRow.id).where(ExplorationRow.id.in_(ids))
