@@ -149,6 +149,8 @@ def samples_of(lattice: Lattice, results: dict[str, PoseResult]) -> dict:
 # --no-certification turns it off; --certification-share and --core-share override the
 # spec's defaults (None: keep them).
 CERTIFY: dict = {"on": True, "share": None, "core_share": None}
+# --score-levels: refinement levels of the scored adaptive run and its dense grid (2: 7.5°).
+SCORE: dict = {"levels": 1}
 
 
 def exploration_spec(object_id: int, rolls: int, multiple: int, mode: str,
@@ -156,7 +158,7 @@ def exploration_spec(object_id: int, rolls: int, multiple: int, mode: str,
     """The benchmark's adaptive run: GRID with one refinement level, the default exploration
     settings with start-gap `mode`, the default certification; `refinement_budget` caps the
     refinement poses."""
-    base = base_spec(object_id, rolls, multiple)
+    base = base_spec(object_id, rolls, multiple, SCORE["levels"])
     settings = ExplorationSpec.model_fields["settings"].default_factory()
     refinement = base.refinement.model_copy(
         update={} if refinement_budget is None else {"max_poses": refinement_budget})
@@ -225,7 +227,7 @@ def run_adaptive(name: str, rolls: int, multiple: int, mode: str, dense: dict[st
 def score_config(name: str, rolls: int, multiple: int, mode: str, dense: dict[str, PoseResult],
                  pool, budget_share: float | None) -> tuple[dict, dict]:
     """T1–T4 and diagnostics of one configuration: (figures, table row)."""
-    lattice = lattice_of(rolls, multiple, 1)
+    lattice = lattice_of(rolls, multiple, SCORE["levels"])
     dense_samples = samples_of(lattice, dense)
     radius = radius_function(spec_mesh(ObjectSpec(name=name)))
     _, dense_fine, _ = build_map(lattice, dense_samples, radius)
@@ -260,6 +262,9 @@ def main() -> None:
                         "the dense evaluations the coarse pass and refinement may use "
                         "(refinement.max_poses; local search and certification come on top: "
                         "0.25 ends near 30 %% in all)")
+    parser.add_argument("--score-levels", type=int, default=1,
+                        help="refinement levels of the scored run and its dense grid (2: the "
+                        "7.5° grid; its rows and figures get the tag -levels2)")
     parser.add_argument("--levels", type=int, default=1,
                         help="dense depth for the differing-pair diagnostics at 1 roll "
                         "(2: down to 7.5°, 7× the poses)")
@@ -292,6 +297,9 @@ def main() -> None:
     if args.full:
         args.objects, args.rolls, args.levels = FULL["objects"], FULL["rolls"], 2
     args.cache.mkdir(parents=True, exist_ok=True)
+    SCORE["levels"] = args.score_levels
+    if args.score_levels != 1:
+        args.tag += f"-levels{args.score_levels}"
     CERTIFY.update(on=not args.no_certification, share=args.certification_share,
                    core_share=args.core_share)
     GRID.clear()
@@ -345,12 +353,14 @@ def main() -> None:
                     dense_figures[f"{tag}.rolls1.levels{levels}.{k}"] = v
                 dense_figures[f"{tag}.rolls1.levels{levels}.dense_poses"] = len(samples1)
                 for rolls in args.rolls:
-                    dense = dense_grid(name, mode, rolls, 1, multiple, pool, args.cache, digest)
+                    dense = dense_grid(name, mode, rolls, args.score_levels, multiple, pool,
+                                       args.cache, digest)
                     for budget in args.budgets:
                         share = None if budget == "default" else float(budget)
                         got, row = score_config(name, rolls, multiple, mode, dense, pool, share)
                         btag = ("default" if share is None else f"budget{budget}") + args.tag
                         row |= {"variant": args.tag, "simulator_digest": digest,
+                                "refinement_levels": args.score_levels,
                                 "load_avg_1min": round(os.getloadavg()[0], 1)}
                         for k, v in got.items():
                             figures[f"{name}.rolls{rolls}.{mode}.{btag}.{k}"] = v
