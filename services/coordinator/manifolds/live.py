@@ -142,7 +142,8 @@ def write(session: Session, exploration_id: int, state: MapState, *, final: bool
     exploration = session.get(ExplorationRow, exploration_id)
     assert exploration is not None
     running = state.running
-    whole = not _in_sync(session, exploration_id, state)
+    whole = not _in_sync(session, exploration_id, state) and not _adopt(
+        session, exploration_id, state)
     if whole:
         session.execute(update(PoseRow).where(PoseRow.exploration_id == exploration_id)
                         .values(manifold_id=None).execution_options(synchronize_session=False))
@@ -211,6 +212,61 @@ def write(session: Session, exploration_id: int, state: MapState, *, final: bool
     state.rows_of = {main: (keep[main], m) for main, m in wanted.items()}
     state.mark = (exploration.poses_done, final)
     state.dirty, state.rescored = set(), set()
+
+
+def _adopt(session: Session, exploration_id: int, state: MapState) -> bool:
+    """Take the stored table as this state's last write (after a restart the state comes
+    from a snapshot older than the store's table; another process may have written it):
+    each manifold keeps the row its best pose is stored in, rows left over go, and the
+    poses whose stored manifold or robust score is not this state's are marked to be
+    written. The write then costs what differs, not the map. False (write it whole) where
+    a stored summary cannot be read."""
+    running = state.running
+    stored: dict[int, ManifoldSummary] = {}
+    try:
+        for row_id, summary in session.execute(
+                select(ManifoldRow.id, ManifoldRow.summary)
+                .where(ManifoldRow.exploration_id == exploration_id)):
+            stored[row_id] = ManifoldSummary.model_validate(summary)
+    except ValueError:  # a summary of another format: written whole
+        return False
+    point_of = {s.key: p for p, s in running.samples.items()}
+    held: dict[Point, int | None] = {}
+    scores: dict[Point, tuple[Any, Any, Any]] = {}
+    loose: list[str] = []  # a manifold stored for a pose that has none
+    for key, manifold_id, rs, rq, rl in session.execute(
+            select(PoseRow.pose_key, PoseRow.manifold_id, PoseRow.robust_s, PoseRow.robust_q,
+                   PoseRow.robust_label).where(PoseRow.exploration_id == exploration_id)):
+        p = point_of.get(key)
+        if p is None or not running.samples[p].viable:
+            if manifold_id is not None:
+                loose.append(key)
+            continue
+        held[p] = manifold_id
+        scores[p] = (rs, rq, rl)
+    table = running.table
+    rows_of: dict[int, tuple[int, ManifoldSummary]] = {}
+    taken: set[int] = set()
+    for main, m in zip(table.mains, table.manifolds, strict=True):
+        row_id = held.get(point_of[m.best.key])
+        if row_id is not None and row_id in stored and row_id not in taken:
+            taken.add(row_id)
+            rows_of[main] = (row_id, stored[row_id])
+    for n, row_id in enumerate(sorted(stored.keys() - taken)):
+        rows_of[-1 - n] = (row_id, stored[row_id])  # no main: the write deletes it
+    row_of = {main: row_id for main, (row_id, _) in rows_of.items()}
+    state.dirty = {p for p, row_id in held.items()
+                   if row_id is None or row_of.get(running.final(p)) != row_id}
+    state.rescored = {p for p, sc in running.scores.items()
+                      if scores.get(p) != (sc.s, sc.q, sc.label.value)}
+    if loose:
+        poses = PoseRow.__table__
+        session.connection().execute(
+            poses.update()
+            .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
+            .values(manifold_id=None), [{"k": key} for key in loose])
+    state.rows_of = rows_of
+    return True
 
 
 def _signatures(session: Session, exploration_id: int, keys: set[str]) -> dict[str, Any]:
