@@ -118,7 +118,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.sessionmaker = db.make_sessionmaker(app.state.engine)
     app.state.schema_head = db.head_revision()
     app.state.metrics = Metrics(app.state.sessionmaker)
-    app.middleware("http")(app.state.metrics.middleware)
+    app.add_middleware(app.state.metrics.middleware)
 
     @app.exception_handler(CoordinatorError)
     async def _domain_error(_request: Request, exc: CoordinatorError) -> JSONResponse:
