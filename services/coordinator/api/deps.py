@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import secrets
-from collections.abc import Iterator
+from collections.abc import AsyncIterator
 from typing import Annotated
 
+import anyio.to_thread
+from anyio import CancelScope, CapacityLimiter
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from graspscape.services.coordinator.settings import Settings
@@ -18,9 +20,20 @@ def get_settings_dep(request: Request) -> Settings:
     return request.app.state.settings
 
 
-def get_session(request: Request) -> Iterator[Session]:
-    with request.app.state.sessionmaker() as session:
+async def get_session(request: Request) -> AsyncIterator[Session]:
+    """A session per request. Made on the event loop: a new Session touches no connection
+    (one is checked out at its first statement, in the route's thread), so entering it in a
+    worker thread, as a sync generator dependency is, was a thread hop for nothing (issue 21).
+    Closing it returns the connection (a rollback: I/O), so that stays in a thread, with its
+    own limiter and shielded from cancellation as FastAPI closes a sync dependency: waiting
+    for a token of the shared thread pool while routes hold them all, waiting for this
+    connection, would deadlock."""
+    session = request.app.state.sessionmaker()
+    try:
         yield session
+    finally:
+        with CancelScope(shield=True):
+            await anyio.to_thread.run_sync(session.close, limiter=CapacityLimiter(1))
 
 
 def require_token(
