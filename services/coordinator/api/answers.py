@@ -26,7 +26,7 @@ from typing import Any
 
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.store.models import ExplorationRow
-from sqlalchemy import select
+from sqlalchemy import bindparam, select
 from sqlalchemy.orm import Session
 
 CACHED_ANSWERS = 512
@@ -38,12 +38,14 @@ _VERSION = select(
     ExplorationRow.created_at, ExplorationRow.updated_at, ExplorationRow.status,
     ExplorationRow.poses_done, ExplorationRow.manifolds_poses_done,
     ExplorationRow.manifolds_final,
-)
+).where(ExplorationRow.id == bindparam("exploration_id"))
 
 
 def version(session: Session, exploration_id: int) -> tuple[Any, ...]:
     """The exploration's map version (see the module docstring). NotFound: no exploration."""
-    row = session.execute(_VERSION.where(ExplorationRow.id == exploration_id)).one_or_none()
+    # One prebuilt statement on the session's connection: ~25 µs, against ~115 µs through the
+    # ORM's execute with a new WHERE each call (its cache key and compile state; issue 21).
+    row = session.connection().execute(_VERSION, {"exploration_id": exploration_id}).one_or_none()
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
     return (str(session.get_bind().url), exploration_id, *row)
