@@ -230,6 +230,7 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
             if last:
                 break
             tiles.pop(k + 1)
+    shutil.rmtree(folder)  # the database and the snapshots: hundreds of MB at 100k poses
 
 
 def main() -> None:
