@@ -30,7 +30,7 @@ from graspscape.services.coordinator.store.models import (
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.results import Outcome
-from sqlalchemy import Row, bindparam, delete, func, select
+from sqlalchemy import bindparam, delete, func, select
 from sqlalchemy.orm import Session
 
 
@@ -205,12 +205,13 @@ def list_poses(
     filters: PoseFilter,
     limit: int,
     cursor: int | None,
-) -> tuple[list[Row[Any]], int | None]:
+) -> tuple[list[dict[str, Any]], int | None]:
     """Keyset pagination by row id: stable while results keep arriving. Rows of only the
     columns PoseOut returns, read through Core on the session's connection: the ORM's identity
     map, instance state and the columns the page does not show cost most of a page's CPU
-    (issue 21); PoseOut validates these rows by attribute as it did the ORM objects. The
-    exploration's existence is checked by its id alone (the ORM row decodes its spec)."""
+    (issue 21). Each as a dict of PoseOut's fields: pydantic validates a dict in half the
+    time it reads a row's attributes. The exploration's existence is checked by its id alone
+    (the ORM row decodes its spec)."""
     if session.connection().execute(_EXISTS, {"eid": exploration_id}).first() is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
     problems = filters.inverted_ranges()
@@ -238,7 +239,7 @@ def list_poses(
             query = query.where(column <= hi)
     rows = list(session.connection().execute(query.order_by(PoseRow.id).limit(limit + 1)))
     next_cursor = rows[limit - 1].id if len(rows) > limit else None
-    return rows[:limit], next_cursor
+    return [row._asdict() for row in rows[:limit]], next_cursor
 
 
 _EXISTS = select(ExplorationRow.id).where(ExplorationRow.id == bindparam("eid"))
