@@ -8,7 +8,8 @@ grown by SAVE_GROWTH since the last save, and when it is final. After a restart 
 refresh loads it and reads only the rows stored since, as any refresh does; everything it
 trusts is checked as before (the rows read must add up to the exploration's `poses_done`,
 the table must be as the state last wrote it: live.py), so a stale or foreign snapshot costs
-one rebuild, never a wrong table.
+one rebuild, never a wrong table; one written by other code (a digest of the modules whose
+objects it holds: `code_version`) is not loaded at all.
 
 Where: the directory in GRASPSCAPE_MANIFOLD_SNAPSHOTS, else, for a SQLite file, a directory
 beside it (`<database>.manifold-maps`); none (no snapshots) for other databases without the
@@ -18,6 +19,7 @@ own: they are unpickled, so the directory must not be writable by anyone else.
 
 from __future__ import annotations
 
+import functools
 import gc
 import hashlib
 import logging
@@ -33,9 +35,34 @@ from graspscape.services.coordinator.manifolds.live import MapState
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
 ENV = "GRASPSCAPE_MANIFOLD_SNAPSHOTS"
-FORMAT = 1  # bump when RunningMap's state changes shape: older files are ignored
+FORMAT = 1  # with the code's digest (`code_version`): files of other code are ignored
 SAVE_GROWTH = 1.2  # save when the rows read have grown by this factor since the last save
 MIN_ROWS = 5_000  # smaller maps rebuild in a few seconds: not worth a file
+
+
+@functools.cache
+def code_version() -> str:
+    """A digest of the source of every module whose classes a snapshot holds: a snapshot
+    written by other code (an upgrade) is not loaded, rather than loaded half-compatible."""
+    from graspscape.services.coordinator.exploration import lattice
+    from graspscape.services.coordinator.manifolds import (
+        aggregate,
+        behaviour,
+        exact,
+        grouping,
+        incremental,
+        live,
+        robust,
+        running,
+        specks,
+        summary,
+    )
+
+    digest = hashlib.sha256(str(FORMAT).encode())
+    for module in (lattice, aggregate, behaviour, exact, grouping, incremental, live, robust,
+                   running, specks, summary):
+        digest.update(Path(module.__file__ or "").read_bytes())
+    return digest.hexdigest()[:16]
 
 
 def directory(url: str) -> Path | None:
@@ -66,7 +93,7 @@ def load(folder: Path | None, key: Hashable) -> MapState | None:
     except Exception:  # a torn or foreign file: rebuild from the rows instead
         log.exception("manifold snapshot %s unreadable: rebuilding from the rows", path)
         return None
-    if not (isinstance(saved, dict) and saved.get("format") == FORMAT
+    if not (isinstance(saved, dict) and saved.get("format") == code_version()
             and saved.get("key") == repr(key)):
         return None
     state = MapState(saved["running"], last_id=saved["last_id"], rows=saved["rows"],
@@ -90,7 +117,7 @@ def maybe_save(folder: Path | None, key: Hashable, state: MapState, *, final: bo
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     t = time.perf_counter()
     with tmp.open("wb") as f, _no_gc():
-        pickle.dump({"format": FORMAT, "key": repr(key), "running": state.running,
+        pickle.dump({"format": code_version(), "key": repr(key), "running": state.running,
                      "last_id": state.last_id, "rows": state.rows, "mark": state.mark,
                      "rows_of": state.rows_of}, f, protocol=pickle.HIGHEST_PROTOCOL)
     os.replace(tmp, path)

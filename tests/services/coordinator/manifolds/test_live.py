@@ -161,5 +161,8 @@ def test_a_snapshot_of_another_exploration_or_format_is_not_used(tmp_path) -> No
     assert snapshot.load(tmp_path, ("u", 1, "t")) is None
     import pickle
 
-    path.write_bytes(pickle.dumps({"format": snapshot.FORMAT, "key": repr(("u", 2, "t"))}))
-    assert snapshot.load(tmp_path, ("u", 1, "t")) is None
+    path.write_bytes(pickle.dumps({"format": snapshot.code_version(),
+                                   "key": repr(("u", 2, "t"))}))
+    assert snapshot.load(tmp_path, ("u", 1, "t")) is None  # another key
+    path.write_bytes(pickle.dumps({"format": "other code", "key": repr(("u", 1, "t"))}))
+    assert snapshot.load(tmp_path, ("u", 1, "t")) is None  # another version of the code
