@@ -384,16 +384,16 @@ def main() -> None:
 
 SUBSET_NOTE = (
     "The issue's set (mug, cube and 2 YCB objects; 1/2/4/8 rolls at 15°, 7.5° at 1 roll; "
-    "--full) needs ~40k dense poses per start-gap mode; on 2 shared cores (1-3 dense poses/s "
+    "--full) needs ~40k dense poses per start-gap mode; on 2 shared cores (1-10 dense poses/s "
     "with 2 processes at nice 10, load average 3-38) the palm rows were run on 2026-12-03. "
-    "Digest 514032cf8f5f (the code of 4d2d4c6, with --digest): cube and banana at 1 roll, mug "
-    "at 2 and 4 rolls, the -cert50 variant (--budgets 0.2 --certification-share 0.5 "
+    "Digest 514032cf8f5f (the code of 4d2d4c6, with --digest): cube and banana at 1 roll, "
+    "the -cert50 variant (--budgets 0.2 --certification-share 0.5 "
     "--core-share 0.8 --tag=-cert50) of cube and banana. Digest 3f992cb9d5cf (the current "
     "simulator; adaptive runs on a clean snapshot of 805abc2): mug at 1 roll (every figure "
     "equal to its 514032cf8f5f rows), mustard bottle and power drill at 1 roll (--budgets "
-    "default 0.25, and -cert50), mug at 8 rolls where its rows are present. Rows without a "
-    "simulator_digest (clearance start gap) are of 2026-12-01, with the code of then. The "
-    "7.5° step was not scored.")
+    "default 0.25, and -cert50), mug at 2, 4 and 8 rolls (--dense-only first), mug at 7.5° "
+    "(--levels 2 --score-levels 2, rows tagged -levels2). Rows without a simulator_digest "
+    "(clearance start gap) are of 2026-12-01, with the code of then.")
 
 
 if __name__ == "__main__":
