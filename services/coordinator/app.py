@@ -30,6 +30,7 @@ from graspscape.services.coordinator.api import (
 )
 from graspscape.services.coordinator.api.finite import validation_error_handler
 from graspscape.services.coordinator.errors import CoordinatorError, InvalidInput
+from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.metrics import Metrics
 from graspscape.services.coordinator.settings import Settings, get_settings
 from graspscape.services.coordinator.store.queue import requeue_expired
@@ -117,6 +118,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.engine = db.make_engine(settings.database.resolved_url)
     app.state.sessionmaker = db.make_sessionmaker(app.state.engine)
     app.state.schema_head = db.head_revision()
+    # Running maps saved for a restart (manifolds/snapshot.py): beside a SQLite file, else here.
+    snapshot.configure(settings.database.data_dir / "manifold-maps")
     app.state.metrics = Metrics(app.state.sessionmaker)
     app.add_middleware(app.state.metrics.middleware)
 

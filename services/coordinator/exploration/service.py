@@ -15,6 +15,7 @@ from graspscape.services.coordinator.exploration.schemas import (
     PoseOut,
     Progress,
 )
+from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.store import queue, tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
@@ -22,6 +23,7 @@ from graspscape.services.coordinator.store.models import (
     ExplorationRow,
     ExplorationStatus,
     ManifoldRow,
+    MapPictureRow,
     ObjectRow,
     PosePlanRow,
     PoseRow,
@@ -192,10 +194,14 @@ def delete_exploration(session: Session, *, exploration_id: int) -> None:
     get_exploration(session, exploration_id=exploration_id)
     # Children first, explicitly: the FK cascades would do it too, but this does not depend
     # on SQLite's foreign_keys pragma being on for whoever opened the connection.
-    for model in (PoseRow, ManifoldRow, PosePlanRow, TileRow):
+    created_at = session.get(ExplorationRow, exploration_id).created_at
+    for model in (PoseRow, ManifoldRow, PosePlanRow, TileRow, MapPictureRow):
         session.execute(delete(model).where(model.exploration_id == exploration_id))
     session.execute(delete(ExplorationRow).where(ExplorationRow.id == exploration_id))
     session.commit()
+    # Its running map's file on disk too (after the commit: a failed delete keeps it).
+    url = str(session.get_bind().url)
+    snapshot.remove(snapshot.directory(url), (url, exploration_id, created_at))
 
 
 def list_poses(

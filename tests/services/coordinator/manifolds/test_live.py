@@ -166,3 +166,26 @@ def test_a_snapshot_of_another_exploration_or_format_is_not_used(tmp_path) -> No
     assert snapshot.load(tmp_path, ("u", 1, "t")) is None  # another key
     path.write_bytes(pickle.dumps({"format": "other code", "key": repr(("u", 1, "t"))}))
     assert snapshot.load(tmp_path, ("u", 1, "t")) is None  # another version of the code
+
+
+def test_deleting_an_exploration_removes_its_saved_map(
+        sessions, named_object, monkeypatch, tmp_path) -> None:
+    from graspscape.services.coordinator.exploration.service import delete_exploration
+    from graspscape.services.coordinator.manifolds import snapshot
+
+    monkeypatch.setenv(snapshot.ENV, str(tmp_path))
+    monkeypatch.setattr(snapshot, "MIN_ROWS", 1)
+    spec = ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
+                           strategy={"name": "grid"}, refinement={"levels": 0},
+                           grid={"dtheta": math.radians(90), "r_min": 0.0, "r_max": 0.01,
+                                 "dr": 0.01, "attitudes": {"rolls": 1}})
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=64, max_poses=10**6).id
+        for t in lease_tiles(s, worker_id="w", n=50, lease_seconds=60):
+            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                           results=[oracle_result(p) for p in t.poses()])
+        service.refresh_manifolds(s, eid, final=True)
+        s.commit()
+        assert len(list(tmp_path.iterdir())) == 1
+        delete_exploration(s, exploration_id=eid)
+        assert list(tmp_path.iterdir()) == []
