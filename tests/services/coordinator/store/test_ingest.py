@@ -363,6 +363,32 @@ def test_a_late_report_before_anyone_re_leases_still_finishes_the_tile(session: 
     assert exploration(session, eid).poses_done == len(t.poses())
 
 
+def ingest_concurrently(sessions: sessionmaker[Session], orders: list[list]) -> list[int]:
+    """One thread per order of (tile, results) batches, each on its own session, all at once;
+    the tiles whose batch moved them, in the order they moved. Fails on any thread's error."""
+    errors: list[BaseException] = []
+    moved: list[int] = []
+
+    def report(order: list) -> None:
+        try:
+            with sessions() as s:
+                for t, results in order:
+                    r = ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
+                                       worker_id="w", results=results)
+                    if r.tile_moved:
+                        moved.append(t.tile_id)
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=report, args=(order,)) for order in orders]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert not errors
+    return moved
+
+
 def test_concurrent_reports_of_the_same_tiles_count_each_pose_once(
     sessions: sessionmaker[Session],
 ) -> None:
@@ -370,33 +396,8 @@ def test_concurrent_reports_of_the_same_tiles_count_each_pose_once(
         eid = make_exploration(s)
         leased = lease_tiles(s, worker_id="w", n=6, lease_seconds=600)
     batches = [(t, fake_results(t.poses(), seed=t.tile_id)) for t in leased]
-    errors: list[BaseException] = []
-    moved: list[int] = []
-
-    def report(offset: int) -> None:
-        try:
-            with sessions() as s:
-                # Every thread sends every tile (the holder's retries and duplicates), in a
-                # different order.
-                for t, results in batches[offset:] + batches[:offset]:
-                    r = ingest_results(
-                        s,
-                        tile_id=t.tile_id,
-                        lease_epoch=t.lease_epoch,
-                        worker_id="w",
-                        results=results,
-                    )
-                    if r.tile_moved:
-                        moved.append(t.tile_id)
-        except BaseException as exc:
-            errors.append(exc)
-
-    threads = [threading.Thread(target=report, args=(i,)) for i in range(4)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(60)
-    assert not errors
+    # Every thread sends every tile (the holder's retries and duplicates), in a different order.
+    moved = ingest_concurrently(sessions, [batches[i:] + batches[:i] for i in range(4)])
     assert sorted(moved) == sorted(t.tile_id for t in leased)  # each tile moved exactly once
     total = sum(len(results) for _, results in batches)
     row = exploration_row(sessions, eid)
@@ -532,26 +533,8 @@ def test_threads_ingesting_halves_and_repeats_of_one_exploration_keep_counters_e
         results = fake_results(t.poses(), seed=t.tile_id)
         half = len(results) // 2
         batches += [(t, results[:half]), (t, results[half:]), (t, results)]
-    errors: list[BaseException] = []
-    moved: list[int] = []
-
-    def report(k: int) -> None:
-        try:
-            with sessions() as s:
-                for t, results in batches[k::4] + batches[:k:-1] + batches[k::-1]:
-                    r = ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
-                                       worker_id="w", results=results)
-                    if r.tile_moved:
-                        moved.append(t.tile_id)
-        except BaseException as exc:
-            errors.append(exc)
-
-    threads = [threading.Thread(target=report, args=(k,)) for k in range(4)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(60)
-    assert not errors
+    moved = ingest_concurrently(sessions, [batches[k::4] + batches[:k:-1] + batches[k::-1]
+                                           for k in range(4)])
     assert sorted(moved) == sorted(t.tile_id for t in leased)  # each tile moved exactly once
     with sessions() as s:
         rows = pose_count(s, eid)
