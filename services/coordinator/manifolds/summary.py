@@ -34,6 +34,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
 )
 from graspscape.services.coordinator.manifolds.robust import (
     LARGE_SHARE,
+    ROBUST_MIN,
     Neighbourhoods,
     RobustLabel,
     RobustScore,
@@ -79,11 +80,20 @@ class RobustBrief(PoseBrief):
 # that may be (uncertain) before one known not to be.
 LABEL_ORDER = {RobustLabel.ROBUST: 0, RobustLabel.UNCERTAIN: 1, RobustLabel.FRAGILE: 2,
                RobustLabel.FUTILE: 3}
+# An uncertain pose whose bound s_high is under ROBUST_MIN cannot turn out robust, whatever its
+# unknown neighbours hold: it ranks after the poses known to be fragile (a known answer before
+# an unknown one that is no better), before the futile ones. Ranked at 1 it was returned as
+# the robust best over the evaluated fragile best (mustard bottle: regret 0.34).
+CANNOT_BE_ROBUST = 2.5
 
 
-def robust_order(s: StoredPose, sc: RobustScore) -> tuple[int, float, float, str]:
-    """Sort key of the robust ranking, best first."""
-    return (LABEL_ORDER[sc.label], -sc.q, -s.mu_s, s.key)
+def robust_order(s: StoredPose, sc: RobustScore) -> tuple[float, float, float, str]:
+    """Sort key of the robust ranking, best first: the label's rank (`LABEL_ORDER`, uncertain
+    poses that cannot be robust at `CANNOT_BE_ROBUST`), then q_δ, μs and the key."""
+    rank: float = LABEL_ORDER[sc.label]
+    if sc.label is RobustLabel.UNCERTAIN and sc.s_high < ROBUST_MIN - 1e-12:
+        rank = CANNOT_BE_ROBUST
+    return (rank, -sc.q, -s.mu_s, s.key)
 
 
 class ManifoldSummary(BaseModel):

@@ -245,3 +245,24 @@ def test_the_manifold_table_carries_core_robust_best_and_dust() -> None:
     text = table_text(mmap.manifolds).splitlines()
     assert len(text) == 2 and text[0].startswith("A: ") and text[1].startswith("dust: 1 ")
     assert f"robust best {disc.robust_best.key} (s 1.00" in text[0]
+
+
+def test_an_uncertain_pose_that_cannot_be_robust_ranks_after_a_known_fragile_one() -> None:
+    """The robust ranking: an uncertain pose goes before a fragile one only while its unknown
+    neighbours could still make it robust (s_high ≥ 0.9); one whose bound is lower is no
+    better than what is known, however high the q_δ of its few known neighbours."""
+    from graspscape.services.coordinator.manifolds.robust import RobustScore
+    from graspscape.services.coordinator.manifolds.summary import robust_order
+
+    a, b, c = (pose(p, POWER, 0.9) for p in POINTS[:3])
+    fragile = RobustScore(s=0.5, q=0.43, s_low=0.5, s_high=0.5,
+                          label=RobustLabel.FRAGILE, known=9, total=9)
+    hopeless = RobustScore(s=0.6, q=0.8, s_low=0.33, s_high=0.67,
+                           label=RobustLabel.UNCERTAIN, known=5, total=9)
+    hopeful = RobustScore(s=1.0, q=0.5, s_low=0.56, s_high=1.0,
+                          label=RobustLabel.UNCERTAIN, known=5, total=9)
+    futile = RobustScore(s=0.0, q=0.0, s_low=0.0, s_high=0.0,
+                         label=RobustLabel.FUTILE, known=9, total=9)
+    ranked = sorted([(a, hopeless), (b, fragile), (c, hopeful), (c, futile)],
+                    key=lambda e: robust_order(*e))
+    assert [sc for _, sc in ranked] == [hopeful, fragile, hopeless, futile]
