@@ -40,8 +40,11 @@ sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests
 
 import graspscape.services.coordinator.exploration.scheduler as scheduler_module  # noqa: E402
 from graspscape.services.coordinator import db  # noqa: E402
+from graspscape.services.coordinator.exploration.samples import lattice_of  # noqa: E402
 from graspscape.services.coordinator.exploration.scheduler import ingest_results  # noqa: E402
 from graspscape.services.coordinator.exploration.service import create_exploration  # noqa: E402
+from graspscape.services.coordinator.exploration.specs import spec_of  # noqa: E402
+from graspscape.services.coordinator.manifolds.service import maybe_refresh  # noqa: E402
 from graspscape.services.coordinator.store.models import (  # noqa: E402
     ExplorationRow,
     ObjectRow,
@@ -52,6 +55,7 @@ from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec  #
 from sqlalchemy import func, select  # noqa: E402
 
 from benchmarks._results import write_results  # noqa: E402
+from benchmarks.bench_query import bench_result  # noqa: E402
 from tests.factories import fake_results  # noqa: E402
 
 PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
@@ -123,20 +127,28 @@ def run_threads(url: str, *, seconds: float, batch: int, threads: int,
             "poses_per_s": sum(stored) / wall}
 
 
-def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
+def run(url: str, *, seconds: float, batch: int, refresh: bool = False) -> dict[str, float]:
+    """One thread storing tile after tile; with `refresh`, each batch is followed by the
+    manifold table's throttled refresh in the same transaction, as the adaptive strategy's
+    turn does it (`maybe_refresh`: every quarter more poses, at most every 1,000), on
+    bench_query's results (a smooth two-type map with realistic signatures; random
+    signatures would make every pose its own manifold), both timed."""
     db.upgrade(url)
     engine = db.make_engine(url)
     sessions = db.make_sessionmaker(engine)
-    _explore(sessions, batch)
+    eid = _explore(sessions, batch)
     poses = batches = 0
     busy = 0.0
     with sessions() as s:
+        spec = spec_of(s.get(ExplorationRow, eid))
+        lattice = lattice_of(spec)
         while busy < seconds:
             tiles = lease_tiles(s, worker_id="bench", n=LEASE_CHUNK, lease_seconds=600)
             if not tiles:
                 break
             for tile in tiles:
-                results = fake_results(tile.poses(), seed=tile.tile_id)
+                results = ([bench_result(p) for p in tile.poses()] if refresh
+                           else fake_results(tile.poses(), seed=tile.tile_id))
                 start = time.perf_counter()
                 report = ingest_results(
                     s,
@@ -145,6 +157,9 @@ def run(url: str, *, seconds: float, batch: int) -> dict[str, float]:
                     worker_id="bench",
                     results=results,
                 )
+                if refresh:
+                    maybe_refresh(s, eid, spec, lattice)
+                    s.commit()
                 busy += time.perf_counter() - start
                 assert report.inserted == len(results) and report.tile_moved
                 poses += report.inserted
@@ -219,10 +234,16 @@ def main() -> int:
                         "git REF against today's, interleaved")
     parser.add_argument("--rounds", type=int, default=3, help="A/B rounds (each one of both)")
     parser.add_argument("--pg-url", default=PG_URL)
+    parser.add_argument("--refresh", action="store_true",
+                        help="single-thread ingest with the manifold table's refresh after "
+                             "each batch, as the adaptive strategy does (results file "
+                             "ingest_refresh.json)")
     args = parser.parse_args()
     backends = args.backends.split(",")
 
     figures: dict[str, float] = {"load_average_1min_start": round(os.getloadavg()[0], 1)}
+    if args.refresh:
+        return run_refresh(args, backends, figures)
     label = "own_explorations" if args.own_explorations else "one_exploration"
     for backend in backends:
         for threads in ([1, args.threads] if args.threads > 1 else [1]):
@@ -248,6 +269,29 @@ def main() -> int:
     figures["load_average_1min_end"] = round(os.getloadavg()[0], 1)
     if not args.no_write:
         write_results("ingest", figures)
+    return 0
+
+
+def run_refresh(args: argparse.Namespace, backends: list[str],
+                figures: dict[str, float]) -> int:
+    for backend in backends:
+        for refresh in (False, True):
+            with contextlib.ExitStack() as stack:
+                if backend == "sqlite":
+                    tmp = stack.enter_context(tempfile.TemporaryDirectory())
+                    url = f"sqlite:///{tmp}/bench.db"
+                else:
+                    url = stack.enter_context(_pg_schema(args.pg_url))
+                got = run(url, seconds=args.seconds, batch=args.batch, refresh=refresh)
+            name = backend.replace("postgresql", "postgres")
+            key = (f"ingest_with_manifold_refresh_poses_per_s_{name}" if refresh
+                   else f"ingest_poses_per_s_{name}")
+            print(f"{backend} refresh={refresh}: {got}", flush=True)
+            figures[key] = round(got["poses_per_s"])
+            figures[key.replace("poses_per_s", "poses_stored")] = got["poses"]
+    figures["load_average_1min_end"] = round(os.getloadavg()[0], 1)
+    if not args.no_write:
+        write_results("ingest_refresh", figures)
     return 0
 
 
