@@ -219,6 +219,13 @@ def _pg_schema(pg_url: str):
     return Schema()
 
 
+def _backend_url(stack: contextlib.ExitStack, backend: str, pg_url: str) -> str:
+    """A fresh database of `backend` for one run, removed when `stack` closes."""
+    if backend == "sqlite":
+        return f"sqlite:///{stack.enter_context(tempfile.TemporaryDirectory())}/bench.db"
+    return stack.enter_context(_pg_schema(pg_url))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="ingest time per backend")
@@ -248,11 +255,7 @@ def main() -> int:
     for backend in backends:
         for threads in ([1, args.threads] if args.threads > 1 else [1]):
             with contextlib.ExitStack() as stack:
-                if backend == "sqlite":
-                    tmp = stack.enter_context(tempfile.TemporaryDirectory())
-                    url = f"sqlite:///{tmp}/bench.db"
-                else:
-                    url = stack.enter_context(_pg_schema(args.pg_url))
+                url = _backend_url(stack, backend, args.pg_url)
                 if threads == 1:
                     got = run(url, seconds=args.seconds, batch=args.batch)
                     key = f"ingest_poses_per_s_{backend.replace('postgresql', 'postgres')}"
@@ -277,11 +280,7 @@ def run_refresh(args: argparse.Namespace, backends: list[str],
     for backend in backends:
         for refresh in (False, True):
             with contextlib.ExitStack() as stack:
-                if backend == "sqlite":
-                    tmp = stack.enter_context(tempfile.TemporaryDirectory())
-                    url = f"sqlite:///{tmp}/bench.db"
-                else:
-                    url = stack.enter_context(_pg_schema(args.pg_url))
+                url = _backend_url(stack, backend, args.pg_url)
                 got = run(url, seconds=args.seconds, batch=args.batch, refresh=refresh)
             name = backend.replace("postgresql", "postgres")
             key = (f"ingest_with_manifold_refresh_poses_per_s_{name}" if refresh

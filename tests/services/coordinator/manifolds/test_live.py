@@ -17,6 +17,16 @@ from sqlalchemy import select
 from tests.factories import oracle_result
 
 
+def sphere_grid(named_object, *, dtheta_deg: float, r_max: float,  # type: ignore[no-untyped-def]
+                rolls: int | None = None) -> ExplorationSpec:
+    """A grid exploration of the built-in sphere, no refinement, r from 0 by 1 cm."""
+    grid = {"dtheta": math.radians(dtheta_deg), "r_min": 0.0, "r_max": r_max, "dr": 0.01}
+    if rolls is not None:
+        grid["attitudes"] = {"rolls": rolls}
+    return ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
+                           strategy={"name": "grid"}, refinement={"levels": 0}, grid=grid)
+
+
 def stored(s, eid: int) -> tuple:  # type: ignore[no-untyped-def]
     labels = dict(s.execute(select(ManifoldRow.id, ManifoldRow.label)
                             .where(ManifoldRow.exploration_id == eid)).all())
@@ -33,10 +43,7 @@ def stored(s, eid: int) -> tuple:  # type: ignore[no-untyped-def]
 
 
 def test_refreshes_tile_by_tile_store_the_whole_rewrite(sessions, named_object) -> None:
-    spec = ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
-                           strategy={"name": "grid"}, refinement={"levels": 0},
-                           grid={"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02,
-                                 "dr": 0.01, "attitudes": {"rolls": 2}})
+    spec = sphere_grid(named_object, dtheta_deg=45, r_max=0.02, rolls=2)
     with sessions() as s:
         eid = create_exploration(s, spec=spec, tile_target_poses=16, max_poses=10**6).id
         tiles = []
@@ -64,10 +71,7 @@ def test_refreshes_tile_by_tile_store_the_whole_rewrite(sessions, named_object) 
 
 
 def test_a_table_written_by_another_process_is_written_whole(sessions, named_object) -> None:
-    spec = ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
-                           strategy={"name": "grid"}, refinement={"levels": 0},
-                           grid={"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.01,
-                                 "dr": 0.01})
+    spec = sphere_grid(named_object, dtheta_deg=45, r_max=0.01)
     with sessions() as s:
         eid = create_exploration(s, spec=spec, tile_target_poses=10, max_poses=10**6).id
         tiles = lease_tiles(s, worker_id="w", n=50, lease_seconds=60)
@@ -101,10 +105,7 @@ def test_a_restart_loads_the_saved_map_and_reads_only_the_rows_since(
 
     monkeypatch.setenv(snapshot.ENV, str(tmp_path))
     monkeypatch.setattr(snapshot, "MIN_ROWS", 1)  # this map is small: save it anyway
-    spec = ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
-                           strategy={"name": "grid"}, refinement={"levels": 0},
-                           grid={"dtheta": math.radians(45), "r_min": 0.0, "r_max": 0.02,
-                                 "dr": 0.01, "attitudes": {"rolls": 2}})
+    spec = sphere_grid(named_object, dtheta_deg=45, r_max=0.02, rolls=2)
     loaded: list = []
     load = snapshot.load
     monkeypatch.setattr(snapshot, "load", lambda *a: loaded.append(
@@ -175,10 +176,7 @@ def test_deleting_an_exploration_removes_its_saved_map(
 
     monkeypatch.setenv(snapshot.ENV, str(tmp_path))
     monkeypatch.setattr(snapshot, "MIN_ROWS", 1)
-    spec = ExplorationSpec(object_id=named_object("sphere"), gripper="robotiq_3f",
-                           strategy={"name": "grid"}, refinement={"levels": 0},
-                           grid={"dtheta": math.radians(90), "r_min": 0.0, "r_max": 0.01,
-                                 "dr": 0.01, "attitudes": {"rolls": 1}})
+    spec = sphere_grid(named_object, dtheta_deg=90, r_max=0.01, rolls=1)
     with sessions() as s:
         eid = create_exploration(s, spec=spec, tile_target_poses=64, max_poses=10**6).id
         for t in lease_tiles(s, worker_id="w", n=50, lease_seconds=60):
