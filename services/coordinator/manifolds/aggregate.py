@@ -22,9 +22,12 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
 
+import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.exact import ONE, exact, pstdev, sqrt_of, value
+from graspscape.services.coordinator.manifolds.grouping import FineGrid, nearest_known
+from scipy.spatial import cKDTree
 
 
 @dataclass
@@ -151,6 +154,42 @@ class PosSet:
         for pos, n in other.count.items():
             (self.add if sign > 0 else self.remove)(pos, w, n)
 
+    def apply(self, pos: list[int], delta: list[int], w: list[int]) -> None:
+        """Add delta[k] points at pos[k] (negative: take them away), distinct positions.
+        The total follows only the positions whose count crosses zero: it is the exact sum
+        over the positions reached, whatever the order the points came and went in."""
+        count, total = self.count, self.total
+        for p, d in zip(pos, delta, strict=True):
+            c = count.get(p, 0) + d
+            if c:
+                if c == d:
+                    total += w[p]
+                count[p] = c
+            else:
+                del count[p]
+                total -= w[p]
+        self.total = total
+
+
+class DensePosSet:
+    """A PosSet over every position of the lattice (counts in one array): the map's viable
+    and non-viable volumes, which a batch changes in bulk."""
+
+    __slots__ = ("count", "total")
+
+    def __init__(self, n_pos: int, w: list[int], n: int = 0) -> None:
+        self.count = np.full(n_pos, n, dtype=np.int64)
+        self.total = sum(w) if n else 0
+
+    def apply(self, pos: np.ndarray, delta: np.ndarray, w: list[int]) -> None:
+        """As PosSet.apply, positions and deltas as arrays."""
+        before = self.count[pos]
+        after = before + delta
+        self.count[pos] = after
+        gained = pos[(before == 0) & (after > 0)].tolist()
+        lost = pos[(before > 0) & (after == 0)].tolist()
+        self.total += sum(w[p] for p in gained) - sum(w[p] for p in lost)
+
 
 @dataclass
 class Comp:
@@ -180,3 +219,80 @@ def top(heap: list[Any], ok: Callable[[Any], bool], k: int = 1) -> list[Any]:
     for entry in out:
         heapq.heappush(heap, entry)
     return out
+
+
+class Owners:
+    """Every finest point's nearest stored pose of its attitude (`grouping.nearest_known`),
+    kept as samples arrive: a new pose can take only points within `rho` of it, or points
+    whose nearest pose is farther than `rho` (`far`, empty once the coarse pass covers the
+    lattice), so only those are searched.
+
+    Points and samples are numbered f = position × n_a + attitude (a sample by its own
+    point; the grid's cells are in (K, J) order, so f orders samples as Points do). What a
+    sample owns is read from the owner array when asked (`positions`), not kept per sample:
+    a sweep's new poses take over most unswept points batch after batch."""
+
+    def __init__(self, grid: FineGrid, rho: float) -> None:
+        assert grid.cells == sorted(grid.cells)
+        n = len(grid.weights) * grid.n_a
+        self.grid, self.rho = grid, rho
+        self.tree = cKDTree(grid.embedding)
+        self.owner = np.full(n, -1, dtype=np.int64)  # f of its nearest sample; -1: none
+        self.d2 = np.full(n, np.inf)  # the rounded squared distance to it (`sq_dist`)
+        self.point: dict[int, Point] = {}  # f → the sample there
+        self.far = [np.arange(len(grid.weights)) for _ in range(grid.n_a)]  # per attitude
+        self._sorted: tuple[np.ndarray, np.ndarray] | None = None  # owner sorted, cached
+
+    def key(self, p: Point) -> int:
+        return self.grid.position(p) * self.grid.n_a + p.attitude
+
+    def take(self, new: Iterable[Point]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Give the new samples the points they are now nearest to: (f, old owner, new
+        owner) of the points that changed hands."""
+        grid, n_a = self.grid, self.grid.n_a
+        by_att: dict[int, list[Point]] = {}
+        for p in new:
+            by_att.setdefault(p.attitude, []).append(p)
+        moves = [(np.zeros(0, dtype=np.int64),) * 3]
+        for a, known in by_att.items():
+            known.sort()
+            own_pos = np.array([grid.position(p) for p in known])
+            keys = own_pos * n_a + a
+            self.point.update(zip(keys.tolist(), known, strict=True))
+            own_emb = grid.embedding[own_pos]
+            near = self.tree.query_ball_point(own_emb, self.rho * (1 + 1e-9))
+            far = self.far[a]
+            if len(far):  # only those the batch may be nearer to than their owner
+                dist, _ = cKDTree(own_emb).query(grid.embedding[far], k=1)
+                far = far[dist ** 2 <= self.d2[far * n_a + a] + 1e-9]
+            cand = np.unique(np.concatenate([np.concatenate([np.asarray(x, dtype=np.int64)
+                                                             for x in near]), far]))
+            idx, d2 = nearest_known(grid, known, cand)
+            f = cand * n_a + a
+            cur, old, q = self.d2[f], self.owner[f], keys[idx]
+            # Nearer, or as near and the smaller point (nearest_known's ties).
+            take = (d2 < cur) | ((d2 == cur) & ((old < 0) | (q < old)))
+            f, old, q = f[take], old[take], q[take]
+            self.owner[f] = q
+            self.d2[f] = d2[take]
+            moves.append((f, old, q))
+            far = self.far[a]
+            self.far[a] = far[self.d2[far * n_a + a] > self.rho ** 2]
+        self._sorted = None
+        f, old, q = (np.concatenate(x) for x in zip(*moves, strict=True))
+        return f, old, q
+
+    def positions(self, part: Iterable[Point]) -> tuple[list[int], list[int]]:
+        """The positions of the points these samples own, with how many of them each."""
+        if self._sorted is None:  # once per batch that asks (one that splits a component)
+            order = np.argsort(self.owner, kind="stable")
+            self._sorted = (order, self.owner[order])
+        order, owners = self._sorted
+        keys = np.array([self.key(p) for p in part], dtype=np.int64)
+        lo = np.searchsorted(owners, keys, "left")
+        hi = np.searchsorted(owners, keys, "right")
+        if not (hi > lo).any():
+            return [], []
+        f = np.concatenate([order[a:b] for a, b in zip(lo.tolist(), hi.tolist(), strict=True)])
+        pos, n = np.unique(f // self.grid.n_a, return_counts=True)
+        return pos.tolist(), n.tolist()

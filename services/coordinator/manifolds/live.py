@@ -309,10 +309,13 @@ def fine_labels_of(running: RunningMap) -> Any:
     grid = running.grid
     n_a = grid.n_a
     label = {main: i for i, main in enumerate(running.table.mains)}
-    labels = np.full(len(running._owner), NON_VIABLE)
-    for f, owner in enumerate(running._owner):
-        if owner is not None and running.samples[owner].viable:
-            labels[f] = label[running.final(owner)]  # type: ignore[index]
+    owner = running.owners.owner
+    keys = np.unique(owner[owner >= 0])
+    of_key = np.array([NON_VIABLE, *(  # type: ignore[index]
+        label[running.final(p)] if running.samples[p].viable else NON_VIABLE
+        for p in (running.owners.point[k] for k in keys.tolist()))])
+    labels = of_key[np.searchsorted(keys, owner) + 1]
+    labels[owner < 0] = NON_VIABLE
     points = [Point(K, J, i, a) for K, J in grid.cells for i in range(grid.n_i)
               for a in range(n_a)]
     n_pos = len(grid.weights)

@@ -6,10 +6,11 @@ What a batch changes, and what is redone for it:
 - grouping: `IncrementalGrouping` links the batch in (joins, cuts), telling this map of each
   component made, joined or split (`on_new`, `on_join`, `on_detach`);
 - volumes: every finest-lattice point belongs to its nearest stored pose of its attitude
-  (`grouping.nearest_known`); a new pose can take only points within RHO of it, or points
-  whose nearest pose is farther than RHO (`_far`, empty once the coarse pass covers the
-  lattice), so only those are searched. Each component keeps its points' positions counted
-  (`PosSet`, a position once however many attitudes reach it) with their exact volume;
+  (`aggregate.Owners`: only points within RHO of a new pose, or farther than RHO from their
+  owner, are searched). Each component keeps its points' positions counted (`PosSet`, a
+  position once however many attitudes reach it) with their exact volume, changed in bulk
+  by the points that pass between classes (not viable, or a component: `_move`); a point
+  taken over within its class, as most are while a sweep covers the lattice, changes none;
 - robust scores (manifolds/robust.py) of the batch's poses and their N_δ neighbours;
 - per pose, whether it is in its manifold's robust core and whether it is a local maximum,
   for the poses whose manifold (or whose neighbours') changed;
@@ -32,14 +33,19 @@ from typing import Any
 
 import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.manifolds.aggregate import Comp, PosSet, Stats, top
+from graspscape.services.coordinator.manifolds.aggregate import (
+    Comp,
+    DensePosSet,
+    Owners,
+    Stats,
+    top,
+)
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.exact import value
 from graspscape.services.coordinator.manifolds.grouping import (
     FineGrid,
     fine_grid,
     label_name,
-    nearest_known,
 )
 from graspscape.services.coordinator.manifolds.incremental import IncrementalGrouping
 from graspscape.services.coordinator.manifolds.robust import (
@@ -55,7 +61,6 @@ from graspscape.services.coordinator.manifolds.summary import (
     robust_order,
     summary_of,
 )
-from scipy.spatial import cKDTree
 
 RHO_STEPS = 1.5  # search radius of a new pose's volume, in coarse angular steps
 
@@ -87,17 +92,9 @@ class RunningMap:
         self.comps: dict[int, Comp] = {}
         n_pos, n_a = len(self.grid.weights), self.grid.n_a
         self.w = self.grid.weights_exact
-        self._tree = cKDTree(self.grid.embedding)
-        self._rho = RHO_STEPS * lattice.dtheta(0)
-        # Per finest point f = position × n_a + attitude: its nearest sample and distance.
-        self._owner: list[Point | None] = [None] * (n_pos * n_a)
-        self._d2 = np.full(n_pos * n_a, np.inf)
-        self._owned: dict[Point, set[int]] = {}
-        self._far = [np.arange(n_pos) for _ in range(n_a)]  # positions, per attitude
-        self.viable_pos = PosSet()
-        self.non_viable_pos = PosSet()
-        for pos in range(n_pos):
-            self.non_viable_pos.add(pos, self.w, n_a)
+        self.owners = Owners(self.grid, RHO_STEPS * lattice.dtheta(0))
+        self.viable_pos = DensePosSet(n_pos, self.w)
+        self.non_viable_pos = DensePosSet(n_pos, self.w, n_a)
         self._core: set[Point] = set()
         self._max: set[Point] = set()
         self._touched: set[int] = set()
@@ -132,6 +129,8 @@ class RunningMap:
         comp = self.comps[new] = Comp()
         for p in part:
             self._count_in(comp, p)
+        pos, n = self.owners.positions(part)
+        comp.own.apply(pos, n, self.w)
         a = self.comps[old]
         a.stats.merge(comp.stats, -1)
         a.own.merge(comp.own, self.w, -1)
@@ -141,12 +140,10 @@ class RunningMap:
         self._moved |= part
 
     def _count_in(self, comp: Comp, p: Point) -> None:
-        """Add p's share to a component it has just joined (sums, owned points, flags)."""
+        """Add p's share to a component it has just joined (sums, flags; not the points it
+        owns: a new pose owns none yet, a detached part's are counted at once)."""
         s = self.samples[p]
         comp.stats.add(s)
-        n_a = self.grid.n_a
-        for f in self._owned.get(p, ()):
-            comp.own.add(f // n_a, self.w)
         if p in self._core:
             comp.core.add(self.grid.position(p), self.w)
             comp.core_count += 1
@@ -189,57 +186,49 @@ class RunningMap:
 
     def _own(self, new: Mapping[Point, StoredPose]) -> None:
         """Give the new samples the finest points they are now nearest to."""
-        grid, n_a = self.grid, self.grid.n_a
-        by_att: dict[int, list[Point]] = {}
-        for p in new:
-            by_att.setdefault(p.attitude, []).append(p)
-        for a, known in by_att.items():
-            known.sort()
-            own_pos = np.array([grid.position(p) for p in known])
-            own_emb = grid.embedding[own_pos]
-            near = self._tree.query_ball_point(own_emb, self._rho * (1 + 1e-9))
-            far = self._far[a]
-            if len(far):  # only those the batch may be nearer to than their owner
-                dist, _ = cKDTree(own_emb).query(grid.embedding[far], k=1)
-                far = far[dist ** 2 <= self._d2[far * n_a + a] + 1e-9]
-            cand = np.unique(np.concatenate([np.concatenate([np.asarray(x, dtype=np.int64)
-                                                             for x in near]), far]))
-            idx, d2 = nearest_known(grid, known, cand)
-            f = cand * n_a + a
-            cur = self._d2[f]
-            for k in np.flatnonzero(d2 <= cur):
-                fk = int(f[k])
-                q = known[int(idx[k])]
-                old = self._owner[fk]
-                if d2[k] == cur[k] and old is not None and old < q:
-                    continue
-                self._owner[fk] = q
-                self._d2[fk] = d2[k]
-                self._move_point(fk, old, q)
-            far = self._far[a]
-            self._far[a] = far[self._d2[far * n_a + a] > self._rho ** 2]
+        moves = self.owners.take(new)
+        if len(moves[0]):
+            self._move(*moves)
 
-    def _move_point(self, f: int, old: Point | None, new: Point) -> None:
-        pos, w = f // self.grid.n_a, self.w
-        if old is None or not self.samples[old].viable:
-            self.non_viable_pos.remove(pos, w)
-        else:
-            self.viable_pos.remove(pos, w)
-        if old is not None:
-            self._owned[old].discard(f)
-            cid = self.g.comp_of(old)
-            if cid is not None:
-                self.comps[cid].own.remove(pos, w)
-                self._touched.add(cid)
-        self._owned.setdefault(new, set()).add(f)
-        if self.samples[new].viable:
-            self.viable_pos.add(pos, w)
-            cid = self.g.comp_of(new)
-            if cid is not None:
-                self.comps[cid].own.add(pos, w)
-                self._touched.add(cid)
-        else:
-            self.non_viable_pos.add(pos, w)
+    def _move(self, f: np.ndarray, old: np.ndarray, new: np.ndarray) -> None:
+        """Finest points f pass from their old owners (-1: none) to new ones: the counts of
+        the classes they leave and join (-1: not viable, else the owner's component) change
+        where the two differ. Most moves stay in one class (a sweep's new poses take points
+        from the same manifold's earlier ones): nothing changes for them."""
+        owners = np.unique(np.concatenate([old[old >= 0], new]))
+        point = self.owners.point
+        cls = np.array([self._class(point[k]) for k in owners.tolist()],
+                       dtype=np.int64)
+        c_old = np.where(old >= 0, cls[np.searchsorted(owners, np.maximum(old, 0))], -1)
+        c_new = cls[np.searchsorted(owners, new)]
+        changed = c_old != c_new
+        if not changed.any():
+            return
+        c_old, c_new = c_old[changed], c_new[changed]
+        pos = f[changed] // self.grid.n_a
+        n_pos, w = len(self.w), self.w
+        # The map's viable positions: +1 where a point became viable, -1 where it stopped.
+        d = (c_new >= 0).astype(np.int64) - (c_old >= 0)
+        if d.any():
+            at, delta = _summed(pos[d != 0], d[d != 0])
+            self.viable_pos.apply(at, delta, w)
+            self.non_viable_pos.apply(at, -delta, w)
+        # Each component's: -1 where it lost a point, +1 where it gained one.
+        cids = np.concatenate([c_old, c_new])
+        viable = cids >= 0
+        keys = cids[viable] * n_pos + np.concatenate([pos, pos])[viable]
+        signs = np.repeat(np.array([-1, 1], dtype=np.int64), len(pos))[viable]
+        at, delta = _summed(keys, signs)
+        comp_of, bounds = at // n_pos, np.flatnonzero(np.diff(at // n_pos)) + 1
+        for lo, hi in zip([0, *bounds.tolist()], [*bounds.tolist(), len(at)], strict=True):
+            cid = int(comp_of[lo])
+            self.comps[cid].own.apply((at[lo:hi] % n_pos).tolist(), delta[lo:hi].tolist(), w)
+            self._touched.add(cid)
+
+    def _class(self, p: Point) -> int:
+        """-1: p is not viable; else its component."""
+        cid = self.g.comp_of(p) if self.samples[p].viable else None
+        return -1 if cid is None else cid
 
     def _score(self, new: Mapping[Point, StoredPose]) -> None:
         affected = set(new)
@@ -391,3 +380,13 @@ class RunningMap:
         self._touched = set()
         self.table = Table(out, [ids[i] for i in order], viable,
                            value(self.non_viable_pos.total))
+
+
+def _summed(keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct keys (sorted) and the sum of the values of each, those summing to 0
+    left out."""
+    at, inv = np.unique(keys, return_inverse=True)
+    total = np.zeros(len(at), dtype=np.int64)
+    np.add.at(total, inv, values)
+    keep = total != 0
+    return at[keep], total[keep]
