@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import logging
 
+import psycopg
 import pytest
+from graspscape.services.coordinator import db
 from graspscape.services.coordinator.dispatch.outage import StoreOutage, is_store_outage
 from sqlalchemy import create_engine, text
 from sqlalchemy.exc import IntegrityError, OperationalError
+
+from tests.conftest import PG_URL
 
 
 def _refused() -> OperationalError:
@@ -53,3 +57,27 @@ def test_one_warning_per_episode_with_reason_and_reminders(caplog):
     assert not outage.ongoing
     outage.failed("lease", exc)  # a new episode gets its own first line
     assert len(caplog.records) == 4 and "store unavailable" in caplog.records[3].getMessage()
+
+
+def test_a_dropped_connection_costs_one_unavailable_answer_then_the_pool_reconnects() -> None:
+    """Without pool_pre_ping (a round trip per transaction): PostgreSQL ends every backend of
+    the pool (a restart); the next query fails as a store outage, which the dispatcher answers
+    `unavailable`, and every later checkout gets a fresh connection, including those pooled
+    before the failure."""
+    engine = db.make_engine(PG_URL)
+    try:
+        with engine.connect() as first, engine.connect() as second:  # two pooled connections
+            pids = {c.execute(text("SELECT pg_backend_pid()")).scalar() for c in (first, second)}
+        assert len(pids) == 2
+        with psycopg.connect(PG_URL.replace("postgresql+psycopg://", "postgresql://"),
+                             autocommit=True) as admin:
+            for pid in pids:
+                admin.execute("SELECT pg_terminate_backend(%s)", (pid,))
+        with pytest.raises(OperationalError) as failed, engine.connect() as conn:
+            conn.execute(text("SELECT 1"))
+        assert is_store_outage(failed.value) and failed.value.connection_invalidated
+        for _ in range(3):  # the other dead connection is not handed out again
+            with engine.connect() as conn:
+                assert conn.execute(text("SELECT pg_backend_pid()")).scalar() not in pids
+    finally:
+        engine.dispose()
