@@ -14,12 +14,19 @@ exploration row's lock (store/ingest.py) makes ingests take turns; `--own-explor
 each thread an exploration of its own, the same work without that lock, to compare.
 `--baseline REF` adds an interleaved A/B of that K-thread run on PostgreSQL: store/ingest.py
 as it was at git REF against today's, `--rounds` times each (medians in the results).
+
+`--refresh` (ingest_refresh.json) times the single thread with the manifold table's refresh
+after each batch, and the manifold upkeep's own CPU per pose (`maybe_refresh`; this
+process's CPU: SQLite's work included, PostgreSQL's server not). With `--baseline REF` it
+runs that `--rounds` times per backend, interleaved, each run in a fresh process: the
+manifolds package as it was at git REF (`git archive`) against today's.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import os
 import queue
 import statistics
@@ -37,6 +44,11 @@ import psycopg
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
+MANIFOLDS_AT = "GRASPSCAPE_BENCH_MANIFOLDS"  # a baseline run: the manifolds package's folder
+if os.environ.get(MANIFOLDS_AT):  # before anything imports a module of it
+    import graspscape.services.coordinator.manifolds as _manifolds
+
+    _manifolds.__path__[:] = [os.environ[MANIFOLDS_AT]]
 
 import graspscape.services.coordinator.exploration.scheduler as scheduler_module  # noqa: E402
 from graspscape.services.coordinator import db  # noqa: E402
@@ -138,7 +150,7 @@ def run(url: str, *, seconds: float, batch: int, refresh: bool = False) -> dict[
     sessions = db.make_sessionmaker(engine)
     eid = _explore(sessions, batch)
     poses = batches = 0
-    busy = 0.0
+    busy = upkeep = 0.0
     with sessions() as s:
         spec = spec_of(s.get(ExplorationRow, eid))
         lattice = lattice_of(spec)
@@ -158,14 +170,17 @@ def run(url: str, *, seconds: float, batch: int, refresh: bool = False) -> dict[
                     results=results,
                 )
                 if refresh:
+                    cpu = time.process_time()
                     maybe_refresh(s, eid, spec, lattice)
                     s.commit()
+                    upkeep += time.process_time() - cpu
                 busy += time.perf_counter() - start
                 assert report.inserted == len(results) and report.tile_moved
                 poses += report.inserted
                 batches += 1
     engine.dispose()
-    return {"poses": poses, "batches": batches, "seconds": busy, "poses_per_s": poses / busy}
+    return {"poses": poses, "batches": batches, "seconds": busy, "poses_per_s": poses / busy,
+            "upkeep_cpu_ms_per_pose": 1000 * upkeep / poses}
 
 
 def _store_batch_at(ref: str) -> Any:
@@ -241,6 +256,7 @@ def main() -> int:
                         "git REF against today's, interleaved")
     parser.add_argument("--rounds", type=int, default=3, help="A/B rounds (each one of both)")
     parser.add_argument("--pg-url", default=PG_URL)
+    parser.add_argument("--refresh-run", metavar="BACKEND", help=argparse.SUPPRESS)
     parser.add_argument("--refresh", action="store_true",
                         help="single-thread ingest with the manifold table's refresh after "
                              "each batch, as the adaptive strategy does (results file "
@@ -248,6 +264,11 @@ def main() -> int:
     args = parser.parse_args()
     backends = args.backends.split(",")
 
+    if args.refresh_run:  # one run of an A/B (`refresh_ab`), in a process of its own
+        with contextlib.ExitStack() as stack:
+            url = _backend_url(stack, args.refresh_run, args.pg_url)
+            print(json.dumps(run(url, seconds=args.seconds, batch=args.batch, refresh=True)))
+        return 0
     figures: dict[str, float] = {"load_average_1min_start": round(os.getloadavg()[0], 1)}
     if args.refresh:
         return run_refresh(args, backends, figures)
@@ -288,10 +309,53 @@ def run_refresh(args: argparse.Namespace, backends: list[str],
             print(f"{backend} refresh={refresh}: {got}", flush=True)
             figures[key] = round(got["poses_per_s"])
             figures[key.replace("poses_per_s", "poses_stored")] = got["poses"]
+            if refresh:
+                figures[f"manifold_upkeep_cpu_ms_per_pose_{name}"] = round(
+                    got["upkeep_cpu_ms_per_pose"], 3)
+        if args.baseline:
+            figures.update(refresh_ab(args, backend))
     figures["load_average_1min_end"] = round(os.getloadavg()[0], 1)
     if not args.no_write:
-        write_results("ingest_refresh", figures)
+        write_results("ingest_refresh", figures, {"note": (
+            "Shared 2-core VM (other work running: see the load averages). "
+            "manifold_upkeep_cpu_ms_per_pose: maybe_refresh's CPU in this process per pose "
+            "stored (SQLite's work included; PostgreSQL's server not). ab_*: --rounds "
+            "interleaved runs per backend, each in a fresh process, with the manifolds "
+            "package of --baseline (git archive) and today's; medians.")})
     return 0
+
+
+def refresh_ab(args: argparse.Namespace, backend: str) -> dict[str, float]:
+    """Interleaved refresh runs of `backend`: the manifolds package at args.baseline, then
+    today's, `args.rounds` times; the medians of poses/s and upkeep CPU per pose."""
+    got: dict[str, list[dict[str, float]]] = {"baseline": [], "current": []}
+    with tempfile.TemporaryDirectory() as folder:
+        archive = subprocess.run(
+            ["git", "archive", args.baseline, "services/coordinator/manifolds"],
+            cwd=REPO, check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
+        old = str(Path(folder) / "services/coordinator/manifolds")
+        for _ in range(args.rounds):
+            for name in ("baseline", "current"):
+                env = {k: v for k, v in os.environ.items() if k != MANIFOLDS_AT}
+                if name == "baseline":
+                    env[MANIFOLDS_AT] = old
+                out = subprocess.run(
+                    [sys.executable, __file__, "--refresh-run", backend, "--seconds",
+                     str(args.seconds), "--batch", str(args.batch), "--pg-url", args.pg_url],
+                    env=env, check=True, capture_output=True, text=True).stdout
+                got[name].append(json.loads(out.strip().splitlines()[-1]))
+                print(f"A/B {backend} {name}: {got[name][-1]}", flush=True)
+    short = backend.replace("postgresql", "postgres")
+    out: dict[str, float] = {}
+    for name, runs in got.items():
+        out[f"ab_{short}_{name}_with_manifold_refresh_median_poses_per_s"] = round(
+            statistics.median(r["poses_per_s"] for r in runs))
+        out[f"ab_{short}_{name}_manifold_upkeep_median_cpu_ms_per_pose"] = round(
+            statistics.median(r["upkeep_cpu_ms_per_pose"] for r in runs), 3)
+        out[f"ab_{short}_{name}_median_poses_stored"] = statistics.median(
+            r["poses"] for r in runs)
+    return out
 
 
 if __name__ == "__main__":
