@@ -1,8 +1,9 @@
 """The shape-informed haptic grasp synthesis policy G_s (paper Sec. III-D, Alg. 1).
 
-Proximity sensor model: every gripper link (the palm and each phalanx) reads its distance to
-the nearest object surface, pybullet's closest-point query per link, saturated at the sensing
-range and optionally perturbed by seeded Gaussian noise.
+Proximity sensor model: every gripper link (the palm, each phalanx and each link of a joint
+coupled to another, a parallel jaw's second finger) reads its distance to the nearest object
+surface, pybullet's closest-point query per link, saturated at the sensing range and
+optionally perturbed by seeded Gaussian noise.
 
 Step 1, digit alignment: the base holds still while the finger joints θ move along the damped
 pseudo-inverse of Ĵ_s = ∂d̂/∂θ, d̂_i = d_i − d_b (link distance minus the palm's), asking for
@@ -17,7 +18,8 @@ Step 2, grasp closure: base pose and joints move together along the pseudo-inver
 J_s = ∂[d_b, d_1 … d_n]/∂[η_r, θ_g], asking every distance to shrink by the same step (so the
 hand closes in homogeneously, keeping the shape it took in step 1) until every link touches or
 the hand is blocked by the contacts it made. Then, as in G_c, the base holds and the closing
-torque τ_c drives the fingers until their motion halts (the hand's under-actuated closing).
+torque τ_c drives the fingers until their motion halts (the hand's under-actuated closing);
+also when every link reads within d_c without touching yet (closing makes the contact).
 
 Both iterations are closed loops on the live simulation: each update is sent to the base drive
 (force-capped like G_c's approach) and the joint position motors, the physics runs a few steps,
@@ -62,7 +64,11 @@ class ProximitySensors:
         self.range = settings.sensing_range_m
         self.noise = settings.noise_std_m
         self.rng = np.random.default_rng(seed)
-        self.links = [-1] + [j for f in self.hand.fingers for j in f.joints]
+        # The actuated fingers' links and those of joints coupled to them (a parallel jaw's
+        # second finger): unsensed, a follower finger is left where it happens to be, and a
+        # coupled hand closes on one finger's contact with the object off-centre.
+        followers = [follower for follower, *_ in self.hand.couplings]
+        self.links = [-1] + [j for f in self.hand.fingers for j in f.joints] + followers
         self.index = {link: i for i, link in enumerate(self.links)}
 
     def _distance(self, link: int) -> float:
@@ -97,20 +103,35 @@ class JointSnapshot:
                           physicsClientId=self.hand.client)
 
 
-def _descendants(hand) -> dict[int, list[int]]:
-    """Links that move when a finger joint moves: that phalanx and the ones after it."""
-    out: dict[int, list[int]] = {}
-    for finger in hand.fingers:
-        for k, joint in enumerate(finger.joints):
-            out[joint] = finger.joints[k:]
+def _followers(hand, joint: int, q: float) -> list[tuple[int, float]]:
+    """Each joint coupled to `joint` (through its followers too) and its value for q: the gear
+    constraints move them only while the physics steps, so a probe sets them itself."""
+    out: list[tuple[int, float]] = []
+    for follower, driver, ratio, offset in hand.couplings:
+        if driver == joint:
+            value = ratio * q + offset
+            out += [(follower, value), *_followers(hand, follower, value)]
     return out
 
 
+def _moved_links(sensors: ProximitySensors, joints: set[int]) -> list[int]:
+    """Sensing links that move with any of `joints`: those with one of them up their chain."""
+    hand = sensors.hand
+    moved = []
+    for link in sensors.links[1:]:
+        chain = link
+        while chain >= 0 and chain not in joints:
+            chain = get_joint_info(hand.client, hand.body, chain).parent_index
+        if chain >= 0:
+            moved.append(link)
+    return moved
+
+
 def joint_jacobian(sensors: ProximitySensors, joints: list[int], step: float) -> np.ndarray:
-    """∂d/∂θ (rows: sensing links, columns: joints) by forward differences."""
+    """∂d/∂θ (rows: sensing links, columns: joints) by forward differences; a probe moves the
+    joints coupled to the probed one with it, as the gear would."""
     hand = sensors.hand
     state = JointSnapshot(hand)
-    moved = _descendants(hand)
     base = sensors.exact()
     jac = np.zeros((len(sensors.links), len(joints)))
     for col, joint in enumerate(joints):
@@ -118,13 +139,16 @@ def joint_jacobian(sensors: ProximitySensors, joints: list[int], step: float) ->
         upper = get_joint_info(hand.client, hand.body, joint).joint_upper_limit
         # Step inward unless that leaves the joint range (then outward): the model stays valid.
         h = step if q + step <= upper else -step
-        p.resetJointState(hand.body, joint, q + h, 0.0, physicsClientId=hand.client)
-        links = moved[joint]
+        probed = [(joint, q + h), *_followers(hand, joint, q + h)]
+        for moved_joint, value in probed:
+            p.resetJointState(hand.body, moved_joint, value, 0.0, physicsClientId=hand.client)
+        links = _moved_links(sensors, {j for j, _ in probed})
         probe = sensors.exact(links)
         for link, value in zip(links, probe, strict=True):
             row = sensors.index[link]
             jac[row, col] = (value - base[row]) / h
-        state.restore(joint)
+        for moved_joint, _ in probed:
+            state.restore(moved_joint)
     return jac
 
 
@@ -163,6 +187,12 @@ def damped_pinv_step(jac: np.ndarray, wanted: np.ndarray, damping: float) -> np.
 def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
     n = float(np.linalg.norm(v))
     return v * (limit / n) if n > limit else v
+
+
+# Step 2 asks each link to close in by its excess over d_c, so the readings converge onto d_c
+# from above: a WSG-50 stopped with its palm a fraction of a nanometre short of the band, at
+# a fixed point, for 60 iterations. A link this close to the band's edge is in it.
+BAND_SLACK_M = 1e-6
 
 
 @register_policy("haptic")
@@ -221,10 +251,12 @@ class HapticPolicy:
 
         # --- step 2: grasp closure (base pose and joints together) ----------------------
         progress: list[float] = []
+        closed_in = False
         for _ in range(cfg.closure_max_iterations):
             d = sensors.read()
             excess = np.maximum(d - cfg.closure_contact_m, 0.0)
-            if not excess.any():
+            if (excess <= BAND_SLACK_M).all():
+                closed_in = True
                 break  # every link touches
             progress.append(float(excess.sum()))
             if (len(progress) > cfg.stall_window and scene.in_contact()
@@ -245,7 +277,7 @@ class HapticPolicy:
             command_joints(np.clip(angles() + dq, limits[:, 0], limits[:, 1]), hand.effort)
             run(cfg.steps_per_iteration)
         phases.approach_s = time.perf_counter() - t0
-        if not scene.in_contact():
+        if not (closed_in or scene.in_contact()):
             return Outcome.NO_CONTACT
 
         # --- hold: the base stays, the closing torque τ_c closes the fingers (as G_c) --------
