@@ -213,7 +213,10 @@ def lock_explorations(session: Session, exploration_ids: Iterable[int]) -> None:
     them waits on another in the opposite order, and the finish check that follows reads the
     others' tiles as committed (on PostgreSQL each statement reads what was committed when it
     started; a statement that waited on the row lock would still read the tiles from before).
-    SQLite's write lock serializes these transactions anyway; it renders no FOR UPDATE."""
+    FOR UPDATE, not FOR NO KEY UPDATE: the latter would not wait for the ingests' key share,
+    and a requeue of a tile an open ingest has moved would deadlock with that ingest's counter
+    update (test_queue_locks.py). SQLite's write lock serializes these transactions anyway; it
+    renders no FOR UPDATE."""
     ids = sorted(set(exploration_ids))
     if ids:
         session.execute(select(ExplorationRow.id).where(ExplorationRow.id.in_(ids))
