@@ -20,6 +20,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from graspscape.services.coordinator import db, web
 from graspscape.services.coordinator.api import (
+    answers,
     budget,
     datasets,
     explorations,
@@ -121,6 +122,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # Running maps saved for a restart (manifolds/snapshot.py): beside a SQLite file, else here.
     snapshot.configure(settings.database.data_dir / "manifold-maps")
     app.state.metrics = Metrics(app.state.sessionmaker)
+    # Kept answers of the map's read routes before FastAPI's routing (api/answers.py); inside
+    # the metrics middleware, which times and counts them as any request.
+    app.add_middleware(answers.KeptRoutes)
     app.add_middleware(app.state.metrics.middleware)
 
     @app.exception_handler(CoordinatorError)

@@ -14,20 +14,27 @@ answer is never filed under a stale table's version.
 
 Per process, in memory, bounded by count and by bytes (a `/best?limit=100` answer with its
 poses' signatures and grasps is a few hundred kB), least recently used out. Entries are
-response bodies (bytes), never objects a caller could change.
+response bodies (bytes), never objects a caller could change. The fast path's entries
+(`KeptRoutes`, below: the same answers keyed by the raw request) have bounds of their own, the
+same; mostly they share their bodies with this store's.
 """
 
 from __future__ import annotations
 
+import re
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
+from contextvars import ContextVar
+from dataclasses import dataclass
 from typing import Any
 
+import anyio.to_thread
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.store.models import ExplorationRow
-from sqlalchemy import bindparam, select
+from sqlalchemy import Engine, bindparam, select
 from sqlalchemy.orm import Session
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 CACHED_ANSWERS = 512
 CACHED_BYTES = 32 * 2**20
@@ -53,7 +60,9 @@ def version(session: Session, exploration_id: int) -> tuple[Any, ...]:
 
 def answer(key: Hashable, compute: Callable[[], bytes]) -> bytes:
     """The answer filed under `key` (a version and the request's parameters), computed once.
-    Two requests missing at once both compute (the same bytes); neither waits on the other."""
+    Two requests missing at once both compute (the same bytes); neither waits on the other.
+    `key[0]` is the map version (`version`): noted for `KeptRoutes`."""
+    _note(key)
     with _lock:
         body = _answers.get(key)
         if body is not None:
@@ -74,3 +83,134 @@ def clear() -> None:
     with _lock:
         _answers.clear()
         _held[0] = 0
+        _routes.clear()
+        _routes_held[0] = 0
+
+
+# --- the kept routes' fast path ---------------------------------------------------------------
+# A kept answer still cost ~1 ms of the server's CPU, most of it FastAPI's: routing over every
+# route, then solving the dependencies and validating each query parameter, all before the
+# route's dict look-up (in-process profile on the 10k map, issue 21). `KeptRoutes` answers a
+# repeated request before that: keyed by its exact path and raw query string, it serves the
+# bytes FastAPI answered for it when the map's version read now is the version that answer was
+# computed at, and hands every other request to FastAPI unchanged.
+#
+# Only a settled version is served this way: manifolds_final set and the manifold table at
+# every stored pose, where `ensure_manifolds` does nothing (manifolds/service._ensure); a
+# route at any other version may refresh first, so it goes through FastAPI (whose own kept
+# answers still apply). The version an answer was computed at is the one the route filed it
+# under (`answer`'s key), noted through a context variable the route's thread inherits, not a
+# version read around it: a write in between cannot file an answer under the wrong version.
+_ROUTES = re.compile(r"/explorations/([1-9][0-9]{0,9})/(?:best|manifolds(?:/[^/]+)?)")
+_MAX_ID = 2**31 - 1
+_noted: ContextVar[list[Any] | None] = ContextVar("graspscape_kept_versions", default=None)
+_routes: OrderedDict[Hashable, Kept] = OrderedDict()
+_routes_held = [0]
+hits = [0]  # answers served by the fast path (tests; a counter is cheaper than a metric)
+
+
+@dataclass(frozen=True)
+class Kept:
+    """What FastAPI sent for one request at one settled version."""
+
+    version: tuple[Any, ...]
+    route: Any  # scope["route"]: the metrics middleware labels the request by its template
+    headers: tuple[tuple[bytes, bytes], ...]
+    body: bytes
+
+
+def _note(key: Hashable) -> None:
+    noted = _noted.get()
+    if noted is not None and isinstance(key, tuple) and key and isinstance(key[0], tuple):
+        noted.append(key[0])
+
+
+def _settled(v: tuple[Any, ...]) -> bool:
+    # (url, id, created_at, updated_at, status, poses_done, manifolds_poses_done, final)
+    return bool(v[7]) and v[6] == v[5]
+
+
+def _read_version(engine: Engine, url: str, exploration_id: int) -> tuple[Any, ...] | None:
+    # The statement `version` runs, on a pooled connection of the app's engine (the session's
+    # bind): the same tuple a route reads.
+    with engine.connect() as conn:
+        row = conn.execute(_VERSION, {"exploration_id": exploration_id}).one_or_none()
+    return None if row is None else (url, exploration_id, *row)
+
+
+def _keep_route(key: Hashable, kept: Kept) -> None:
+    with _lock:
+        old = _routes.pop(key, None)
+        if old is not None:
+            _routes_held[0] -= len(old.body)
+        _routes[key] = kept
+        _routes_held[0] += len(kept.body)
+        while _routes and (len(_routes) > CACHED_ANSWERS or _routes_held[0] > CACHED_BYTES):
+            _routes_held[0] -= len(_routes.popitem(last=False)[1].body)
+
+
+class KeptRoutes:
+    """ASGI middleware: kept answers of /best, /manifolds and /manifolds/{label} served before
+    FastAPI's routing and validation (see above); everything else passes through."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+        self._urls: dict[int, str] = {}  # id(engine) → str(engine.url), the version's first item
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        match = (_ROUTES.fullmatch(scope["path"])
+                 if scope["type"] == "http" and scope["method"] == "GET" else None)
+        if match is None or int(match[1]) > _MAX_ID:
+            await self.app(scope, receive, send)
+            return
+        exploration_id = int(match[1])
+        engine: Engine = scope["app"].state.engine
+        url = self._urls.get(id(engine))
+        if url is None:
+            url = self._urls[id(engine)] = str(engine.url)
+        key = (url, scope["path"], scope["query_string"])
+        with _lock:
+            kept = _routes.get(key)
+            if kept is not None:
+                _routes.move_to_end(key)
+        if kept is not None:
+            try:
+                now = await anyio.to_thread.run_sync(_read_version, engine, url, exploration_id)
+            except Exception:  # the store's error is FastAPI's to answer, as on any request
+                now = None
+            if now == kept.version:
+                hits[0] += 1
+                scope["route"] = kept.route
+                await send({"type": "http.response.start", "status": 200,
+                            "headers": kept.headers})
+                await send({"type": "http.response.body", "body": kept.body})
+                return
+        await self._answer_and_keep(scope, receive, send, key)
+
+    async def _answer_and_keep(self, scope: Scope, receive: Receive, send: Send,
+                               key: Hashable) -> None:
+        noted: list[Any] = []
+        start: Message | None = None
+        chunks: list[bytes] = []
+        complete = False
+
+        async def capture(message: Message) -> None:
+            nonlocal start, complete
+            if message["type"] == "http.response.start":
+                start = message
+            elif message["type"] == "http.response.body":
+                chunks.append(message.get("body", b""))
+                complete = not message.get("more_body", False)
+            await send(message)
+
+        token = _noted.set(noted)
+        try:
+            await self.app(scope, receive, capture)
+        finally:
+            _noted.reset(token)
+        # One answer filed under one settled version, sent whole with 200: the request's
+        # answer for as long as that version stands.
+        if (start is not None and start["status"] == 200 and complete and len(noted) == 1
+                and _settled(noted[0]) and not start.get("trailers")):
+            _keep_route(key, Kept(noted[0], scope.get("route"), tuple(start["headers"]),
+                                  b"".join(chunks)))
