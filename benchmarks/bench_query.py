@@ -9,13 +9,15 @@ sort. The manifold table is then stored as `bench_reads.store_manifolds` does (t
 grouping a million poses is issue 21's incremental-manifold work, not a read).
 
 The coordinator runs as a real `uvicorn` server in a subprocess (one process, FastAPI's thread
-pool for the sync routes); 8 client threads (httpx, one connection each) in this process send
-each route's requests as fast as answers come. Per route: p50/p95/p99 latency in ms. `map.png`
-is cached per map version, so its first (cold) request is reported apart from the warm ones; the
-CSV export is timed to its first body byte. Sizes: 10k, 100k, 1m poses (`--sizes`,
-`--pg-sizes`). Databases are kept (SQLite files under `--keep`, PostgreSQL schemas
-`q_<size>` in database `bench_query`) and reused, migrated to head before measuring, so a
-rerun after a migration measures the same rows. Writes benchmarks/results/query.json.
+pool for the sync routes; uvloop and httptools, as `graspscape serve`); 8 client threads
+(query_clients.py: http.client, or httpx with --client httpx; one keep-alive connection each)
+in this process send each route's requests as fast as answers come. Per route: p50/p95/p99
+latency in ms. `map.png` is cached per map version, so its first (cold) request is reported
+apart from the warm ones; the CSV export is timed to its first body byte. Sizes: 10k, 100k,
+1m poses (`--sizes`, `--pg-sizes`). Databases are kept (SQLite files under `--keep`,
+PostgreSQL schemas `q_<size>` in database `bench_query`) and reused, migrated to head before
+measuring, so a rerun after a migration measures the same rows. Writes
+benchmarks/results/query.json (--results NAME: NAME.json).
 
     .venv/bin/python benchmarks/bench_query.py [--sizes 10k,100k] [--pg-sizes 10k,100k]
         [--keep DIR] [--rebuild]
@@ -30,7 +32,6 @@ import random
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -40,12 +41,13 @@ import psycopg
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
 
+from benchmarks import query_clients  # noqa: E402
 from benchmarks._results import write_results  # noqa: E402
+from benchmarks.query_clients import CLIENTS, routes, run_route  # noqa: E402
 
 # Coarse Δθ giving about this many poses with 6 r levels and 4 rolls.
 SIZES = {"10k": 0.174, "100k": 0.056, "1m": 0.017}
 TILE_POSES = 2000
-CLIENTS = 8
 PG_ADMIN = "postgresql://postgres@127.0.0.1:5432/postgres"
 PG_DB = "bench_query"
 DEFAULT_KEEP = Path("/tmp/graspscape_bench_query")
@@ -81,6 +83,8 @@ def bench_result(pose):  # type: ignore[no-untyped-def]
 
 
 REVISION = "head"  # --revision: the schema the databases are migrated to
+PER_CLIENT: int | None = None  # --per-client: requests per client of each route but the
+# picture and the CSV (default: the route's own, 6: 48 requests, whose p95 is their 3rd worst)
 
 
 def build(url: str, dtheta: float) -> tuple[int, float]:
@@ -144,14 +148,22 @@ def _pose_count(url: str) -> int:
 
 
 # --- the server ------------------------------------------------------------------------------
-def serve(url: str, port: int) -> None:
+# uvicorn's event loop and HTTP parser: "auto" (uvloop and httptools, dependencies of the
+# package, as `graspscape serve` runs) or "plain" (asyncio and h11: what uvicorn falls back to
+# without them; the stack's share in an A/B, query_overhead.py --stack-ab).
+STACKS = {"auto": ("auto", "auto"), "plain": ("asyncio", "h11")}
+
+
+def serve(url: str, port: int, stack: str = "auto") -> None:
     """The coordinator's app under uvicorn, as `graspscape serve` runs it (zenoh off)."""
     import uvicorn
     from graspscape.services.coordinator.app import create_app
     from graspscape.services.coordinator.settings import Settings
 
     settings = Settings(database={"url": url})
-    uvicorn.run(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
+    loop, http = STACKS[stack]
+    uvicorn.run(create_app(settings), host="127.0.0.1", port=port, log_level="warning",
+                loop=loop, http=http)
 
 
 def _free_port() -> int:
@@ -161,9 +173,10 @@ def _free_port() -> int:
 
 
 class Server:
-    def __init__(self, url: str, code: Path | None = None) -> None:
+    def __init__(self, url: str, code: Path | None = None, stack: str = "auto") -> None:
         """`code`: serve the graspscape package of another checkout (a git worktree of an
-        earlier commit: the before of a before/after in one run), put first on the path."""
+        earlier commit: the before of a before/after in one run), put first on the path;
+        `stack`: uvicorn's loop and parser (STACKS)."""
         self.port = _free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         env = dict(os.environ)
@@ -175,8 +188,9 @@ class Server:
                 link.symlink_to(code.resolve())
             env["PYTHONPATH"] = f"{shim}{os.pathsep}{env.get('PYTHONPATH', '')}"
         # Run from the checkout served: its own configs/ (settings it knows).
-        self.proc = subprocess.Popen([sys.executable, __file__, "--serve", url, str(self.port)],
-                                     cwd=REPO if code is None else code, env=env)
+        self.proc = subprocess.Popen(
+            [sys.executable, __file__, "--serve", url, str(self.port), "--stack", stack],
+            cwd=REPO if code is None else code, env=env)
 
     def __enter__(self) -> Server:
         import httpx
@@ -199,73 +213,6 @@ class Server:
     def __exit__(self, *exc: object) -> None:
         self.proc.terminate()
         self.proc.wait(timeout=30)
-
-
-# --- the clients -----------------------------------------------------------------------------
-def routes(eid: int, max_id: int) -> dict[str, tuple[object, int]]:
-    """Route name → (path or a function of a Random giving one, requests per client)."""
-    base = f"/explorations/{eid}"
-    return {
-        "best": (f"{base}/best?limit=5", 6),
-        "best_mu_s": (f"{base}/best?limit=5&rank=mu_s", 6),
-        "best_torque_margin_ratio": (f"{base}/best?limit=5&rank=torque_margin_ratio", 6),
-        "best_manifold": (f"{base}/best?limit=5&manifold=B", 6),
-        "best_effort": (f"{base}/best?limit=5&max_effort_nm=2.0", 6),
-        "best_cone": (f"{base}/best?limit=5&cone_x=0&cone_y=1&cone_z=0&cone_half_angle_deg=30",
-                      6),
-        "manifolds": (f"{base}/manifolds", 6),
-        "manifold_label": (f"{base}/manifolds/A", 6),
-        "poses_page": (lambda rng: f"{base}/poses?limit=100&cursor={rng.randrange(max_id)}", 6),
-        "poses_viable_page": (
-            lambda rng: f"{base}/poses?limit=100&viable=true&cursor={rng.randrange(max_id)}", 6),
-        "map_png": (f"{base}/map.png", 2),
-        "csv_first_byte": (f"{base}/export/poses.csv", 1),
-    }
-
-
-def _one(client, path: str, first_byte: bool) -> float:  # type: ignore[no-untyped-def]
-    start = time.perf_counter()
-    if first_byte:
-        with client.stream("GET", path) as response:
-            response.raise_for_status()
-            if next(response.iter_raw(), None) is None:
-                raise RuntimeError(f"{path}: an empty body")
-    else:
-        response = client.get(path)
-        response.raise_for_status()
-    return (time.perf_counter() - start) * 1000
-
-
-def run_route(base: str, name: str, path: object, per_client: int) -> list[float]:
-    """`per_client` requests from each of CLIENTS threads at once; latencies in ms."""
-    import httpx
-
-    latencies: list[float] = []
-    errors: list[BaseException] = []
-    lock = threading.Lock()
-    go = threading.Barrier(CLIENTS)
-
-    def client_loop(seed: int) -> None:
-        rng = random.Random(seed)
-        try:
-            with httpx.Client(base_url=base, timeout=600) as client:
-                go.wait()
-                for _ in range(per_client):
-                    p = path(rng) if callable(path) else path
-                    ms = _one(client, str(p), name == "csv_first_byte")
-                    with lock:
-                        latencies.append(ms)
-        except BaseException as exc:  # reported after the join
-            errors.append(exc)
-
-    threads = [threading.Thread(target=client_loop, args=(i,)) for i in range(CLIENTS)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    if errors:
-        raise errors[0]
-    return latencies
 
 
 def measure(url: str, tag: str, figures: dict[str, float], code: Path | None = None,
@@ -302,6 +249,8 @@ def measure(url: str, tag: str, figures: dict[str, float], code: Path | None = N
                 httpx.get(f"{server.base}/explorations/1/{path}", timeout=600).raise_for_status()
                 figures[f"{name}_{tag}"] = round((time.perf_counter() - start) * 1000, 1)
         for name, (path, per_client) in routes(1, max_id).items():
+            if PER_CLIENT is not None and name not in ("map_png", "csv_first_byte"):
+                per_client = PER_CLIENT
             if only is not None and name not in only:
                 continue
             if name not in ("map_png", "csv_first_byte"):
@@ -311,16 +260,19 @@ def measure(url: str, tag: str, figures: dict[str, float], code: Path | None = N
                 start = time.perf_counter()
                 httpx.get(f"{server.base}{first}", timeout=600).raise_for_status()
                 figures[f"{name}_first_ms_{tag}"] = round((time.perf_counter() - start) * 1000, 1)
-            cpu = server.cpu_s()
+            cpu, own = server.cpu_s(), time.process_time()
             try:
                 ms = np.array(run_route(server.base, name, path, per_client))
             except Exception as exc:  # reported in the results, the other routes still run
                 print(f"{tag} {name}: failed: {exc!r}", flush=True)
                 figures[f"{name}_failed_{tag}"] = 1
                 continue
-            # The server's CPU time per request: what a route costs, whatever else runs here.
+            # The server's CPU time per request: what a route costs, whatever else runs here;
+            # and the 8 clients' (this process's), which competes with it for the cores.
             figures[f"{name}_server_cpu_ms_per_request_{tag}"] = round(
                 (server.cpu_s() - cpu) * 1000 / len(ms), 2)
+            figures[f"{name}_client_cpu_ms_per_request_{tag}"] = round(
+                (time.process_time() - own) * 1000 / len(ms), 2)
             for q in (50, 95, 99):
                 figures[f"{name}_p{q}_ms_{tag}"] = round(float(np.percentile(ms, q)), 1)
             print(f"{tag} {name}: p50 {np.percentile(ms, 50):.1f} p95 "
@@ -364,16 +316,28 @@ def main() -> int:
                         help="results file name (benchmarks/results/NAME.json)")
     parser.add_argument("--pg-db", default="bench_query",
                         help="PostgreSQL database the schemas are kept in (DROP it when done)")
+    parser.add_argument("--per-client", type=int,
+                        help="requests per client of each route but map_png and the CSV "
+                        "(default 6)")
+    parser.add_argument("--client", choices=["http.client", "httpx"],
+                        default=query_clients.CLIENT,
+                        help="the 8 clients' HTTP library (default http.client)")
     parser.add_argument("--serve", nargs=2, metavar=("URL", "PORT"), help=argparse.SUPPRESS)
+    parser.add_argument("--stack", choices=sorted(STACKS), default="auto",
+                        help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.serve:
-        serve(args.serve[0], int(args.serve[1]))
+        serve(args.serve[0], int(args.serve[1]), args.stack)
         return 0
 
-    global REVISION, PG_DB
+    global REVISION, PG_DB, PER_CLIENT
     REVISION = args.revision
+    PER_CLIENT = args.per_client
     PG_DB = args.pg_db
-    figures: dict[str, float] = {"clients": CLIENTS, "load_avg_1min_start": _load()}
+    query_clients.CLIENT = args.client
+    figures: dict[str, float] = {"clients": CLIENTS, "load_avg_1min_start": _load(),
+                                 "requests_per_client": args.per_client or 6}
+    print(f"clients: {CLIENTS} threads of {query_clients.CLIENT}", flush=True)
     targets: list[tuple[str, str, str]] = []
     args.keep.mkdir(parents=True, exist_ok=True)
     for size in filter(None, args.sizes.split(",")):
@@ -407,12 +371,14 @@ def main() -> int:
         print(figures)
         return 0
     write_results(args.results, figures, extra={"note": (
-        "uvicorn in a subprocess (one process, FastAPI's thread pool), 8 httpx client threads "
-        "in the bench process on the same machine; map_png percentiles are warm (cached per "
-        "map version) after the cold first request; map_png_cold: the first read in a fresh "
-        "server of the picture drawn ahead (map_png_draw_ahead: drawing and storing it, as the "
-        "coordinator does once a map is final), map_png_other_cold: a picture with other "
-        "parameters (cut=vertical), drawn on read; NAME_first: the route's first request "
+        "uvicorn in a subprocess (one process, FastAPI's thread pool; uvloop and httptools), "
+        f"8 client threads ({query_clients.CLIENT}, one keep-alive connection each) in the "
+        "bench process on the same machine (client_cpu: their CPU per request); map_png "
+        "percentiles are warm (cached per map version) after the cold first request; "
+        "map_png_cold: the first read in a fresh server of the picture drawn ahead "
+        "(map_png_draw_ahead: drawing and storing it, as the coordinator does once a map is "
+        "final), map_png_other_cold: a picture with other parameters (cut=vertical), drawn "
+        "on read; NAME_first: the route's first request "
         "alone (computed; the 8 clients' repeats of the same parameters are kept answers, "
         "api/answers.py); csv_first_byte to the first body byte; "
         "ingest_poses_per_s only where this run built the database (results made outside the "
