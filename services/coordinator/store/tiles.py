@@ -17,6 +17,7 @@ from datetime import datetime
 from typing import Any, Protocol
 
 from graspscape.services.coordinator.store.models import TileRow, TileState
+from graspscape.services.coordinator.store.pipeline import Piped, Step
 from graspscape.shared.wire.messages import LeasedTile
 from sqlalchemy import ColumnElement, bindparam, case, insert, select, update
 from sqlalchemy.orm import Session
@@ -170,6 +171,15 @@ def finish(session: Session, *, tile_id: int, lease_epoch: int, now: datetime) -
     done = session.connection().execute(
         _FINISH, {"tile_id": tile_id, "epoch": lease_epoch, "now": now})
     return done.rowcount == 1
+
+
+_FINISH_PIPED = Piped(_FINISH, {"tile_id": 0, "epoch": 0, "now": None})
+
+
+def finish_step(*, tile_id: int, lease_epoch: int, now: datetime) -> Step:
+    """finish() as a step of a PostgreSQL pipeline (store/pipeline.py): moved when its
+    cursor's rowcount is 1."""
+    return _FINISH_PIPED.step(tile_id=tile_id, epoch=lease_epoch, now=now)
 
 
 def fail_or_requeue(session: Session, *, tile_id: int, lease_epoch: int, error: str,

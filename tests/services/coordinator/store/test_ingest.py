@@ -9,14 +9,14 @@ from collections.abc import Callable
 from datetime import timedelta
 
 import graspscape.services.coordinator.exploration.scheduler as scheduler_module
-import graspscape.services.coordinator.store.tiles as tiles_module
+import graspscape.services.coordinator.store.ingest as ingest_module
 import pytest
 from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import cancel_exploration
 from graspscape.services.coordinator.store.base import utcnow
-from graspscape.services.coordinator.store.ingest import _PER_POSE, _values
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow
+from graspscape.services.coordinator.store.pose_rows import _PER_POSE, _values
 from graspscape.services.coordinator.store.queue import (
     LeasedTile,
     fail_tile,
@@ -558,21 +558,20 @@ def test_a_coordinator_killed_before_the_counter_update_leaves_nothing_and_a_res
         eid = make_exploration(s)
         (t,) = lease_tiles(s, worker_id="w", n=1, lease_seconds=600)
     results = fake_results(t.poses(), seed=t.tile_id)
-    finish = tiles_module.finish
+    count = ingest_module._count
 
-    def killed(session: Session, **kwargs: object) -> bool:
-        assert finish(session, **kwargs)  # type: ignore[arg-type]
+    def killed(session: Session, *args: object, **kwargs: object) -> object:
         session.connection().invalidate()  # the process is gone: its connection with it
         raise ConnectionError("killed")
 
-    monkeypatch.setattr(tiles_module, "finish", killed)
+    monkeypatch.setattr(ingest_module, "_count", killed)
     with sessions() as s, pytest.raises(ConnectionError):
         ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
                        results=results)
     with sessions() as s:
         assert pose_count(s, eid) == 0 and exploration(s, eid).poses_done == 0
         assert s.get(TileRow, t.tile_id).state == "leased"  # type: ignore[union-attr]
-    monkeypatch.setattr(tiles_module, "finish", finish)
+    monkeypatch.setattr(ingest_module, "_count", count)
     with sessions() as s:
         report = ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
                                 worker_id="w", results=results)
