@@ -15,7 +15,9 @@ import math
 import os
 import socket
 import time
-from dataclasses import asdict
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,10 +26,12 @@ from graspscape.services.coordinator import db
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.objects.service import create_named
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
+from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from tests.faults.support import (
     Child,
+    Tally,
     coordinator_args,
     exploration_status,
     leased_to,
@@ -69,9 +73,41 @@ def submit(sessions: sessionmaker[Session], dtheta_deg: float, tile_poses: int) 
                                   max_poses=5_000_000).id
 
 
-def _sessions(url: str) -> tuple[Any, sessionmaker[Session]]:
+@dataclass
+class _Run:
+    """One scenario's exploration, the processes working on it and what it measured."""
+
+    engine: Engine
+    sessions: sessionmaker[Session]
+    exploration_id: int
+    figures: dict[str, Any]
+    children: list[Child] = field(default_factory=list)
+    result: Tally | None = None
+
+    def report(self) -> dict[str, Any]:
+        assert self.result is not None  # set by _scenario's teardown
+        return {"figures": self.figures, "tally": asdict(self.result),
+                "complete": self.result.complete}
+
+
+@contextmanager
+def _scenario(url: str, dtheta_deg: float, tile_poses: int,
+              **figures: Any) -> Iterator[_Run]:
+    """Migrates the database and submits the exploration; however the scenario ends, stops
+    its processes (the last started first), tallies the stored poses against the plan and
+    closes the engine. Enter it inside what the processes need (namespaces, a cluster), so
+    they are stopped before that goes."""
+    db.upgrade(url)
     engine = db.make_engine(url)
-    return engine, db.make_sessionmaker(engine)
+    sessions = db.make_sessionmaker(engine)
+    run = _Run(engine, sessions, submit(sessions, dtheta_deg, tile_poses), dict(figures))
+    try:
+        yield run
+    finally:
+        for child in reversed(run.children):
+            child.stop(30)
+        run.result = tally(sessions, run.exploration_id)
+        engine.dispose()
 
 
 def _finish(sessions: sessionmaker[Session], exploration_id: int, timeout: float,
@@ -95,11 +131,6 @@ def _progress(sessions: sessionmaker[Session], exploration_id: int, base: int, s
     return time.monotonic() - since
 
 
-def _stop_all(children: list[Child]) -> None:
-    for child in reversed(children):
-        child.stop(30)
-
-
 def link_cut(work: Path, cut_s: float, *, dtheta_deg: float = 20.0, tile_poses: int = 12,
              pose_s: float = 0.2) -> dict[str, Any]:
     """The coordinator in a namespace of its own, two workers in one each, a veth pair per
@@ -108,58 +139,47 @@ def link_cut(work: Path, cut_s: float, *, dtheta_deg: float = 20.0, tile_poses: 
     is ridden out by the open transport, a longer one closes it (the coordinator sees the
     worker's liveliness token go, re-queues its tile, worker 1 takes it)."""
     url = f"sqlite:///{work / 'coordinator.db'}"
-    db.upgrade(url)
-    engine, sessions = _sessions(url)
-    exploration_id = submit(sessions, dtheta_deg, tile_poses)
-    children: list[Child] = []
-    figures: dict[str, Any] = {"cut_s": cut_s}
-    try:
-        with namespaces(2) as ns:
-            port = free_port()
-            env = {"GRASPSCAPE_ZENOH__PASSWORD": PASSWORD}
-            children.append(Child(ns.exec(ns.coordinator, coordinator_args(
-                url, 8000, listen=[f"tcp/0.0.0.0:{port}"])), work / "coordinator.log", env))
-            for i, link in enumerate(ns.links):
-                children.append(Child(ns.exec(link.namespace, worker_args(
-                    f"tcp/{link.coordinator_ip}:{port}", f"w{i}", work / "cache",
-                    pose_s=pose_s)), work / f"worker{i}.log", env))
-            # Worker 0 at work: one tile of its stored, then a tile of its none of whose
-            # poses is stored yet.
-            wait_for(lambda: stored_by(sessions, exploration_id, "w0-") > 0, STARTUP_S,
-                     "worker 0's first tile")
+    with namespaces(2) as ns, _scenario(url, dtheta_deg, tile_poses, cut_s=cut_s) as run:
+        sessions, exploration_id, figures = run.sessions, run.exploration_id, run.figures
+        port = free_port()
+        env = {"GRASPSCAPE_ZENOH__PASSWORD": PASSWORD}
+        run.children.append(Child(ns.exec(ns.coordinator, coordinator_args(
+            url, 8000, listen=[f"tcp/0.0.0.0:{port}"])), work / "coordinator.log", env))
+        for i, link in enumerate(ns.links):
+            run.children.append(Child(ns.exec(link.namespace, worker_args(
+                f"tcp/{link.coordinator_ip}:{port}", f"w{i}", work / "cache",
+                pose_s=pose_s)), work / f"worker{i}.log", env))
+        # Worker 0 at work: one tile of its stored, then a tile of its none of whose poses is
+        # stored yet.
+        wait_for(lambda: stored_by(sessions, exploration_id, "w0-") > 0, STARTUP_S,
+                 "worker 0's first tile")
 
-            def fresh_tile() -> list:
-                return [t for t in leased_to(sessions, "w0-") if stored_in(sessions, t[0]) == 0]
-            tile_id = wait_for(fresh_tile, 60, "a fresh tile of worker 0",
-                               every=0.02)[0][0]
-            ns.cut(0)
-            cut_at = time.monotonic()
-            figures["cut_tile"] = tile_id
-            released_after = None
-            while time.monotonic() - cut_at < cut_s:
-                if released_after is None and not [
-                        t for t in leased_to(sessions, "w0-") if t[0] == tile_id]:
-                    released_after = time.monotonic() - cut_at
-                time.sleep(0.1)
-            # Whether the coordinator gave the cut worker's tile up during the cut, and when.
-            figures["tile_released_after_s"] = (None if released_after is None
-                                                else round(released_after, 3))
-            base = stored_by(sessions, exploration_id, "w0-")
-            others_during = stored_by(sessions, exploration_id, "w1-")
-            ns.restore(0)
-            restored_at = time.monotonic()
-            figures["cut_worker_progress_after_restore_s"] = round(_progress(
-                sessions, exploration_id, base, restored_at, 120, "w0-"), 3)
-            figures["other_worker_poses_stored_by_restore"] = others_during
-            _finish(sessions, exploration_id, 300, children)
-            figures["finish_after_restore_s"] = round(time.monotonic() - restored_at, 3)
-            figures["refused_stale_batches"] = children[1].output().count("the lease is gone")
-            _stop_all(children)
-    finally:
-        _stop_all(children)
-        result = tally(sessions, exploration_id)
-        engine.dispose()
-    return {"figures": figures, "tally": asdict(result), "complete": result.complete}
+        def fresh_tile() -> list:
+            return [t for t in leased_to(sessions, "w0-") if stored_in(sessions, t[0]) == 0]
+        tile_id = wait_for(fresh_tile, 60, "a fresh tile of worker 0", every=0.02)[0][0]
+        ns.cut(0)
+        cut_at = time.monotonic()
+        figures["cut_tile"] = tile_id
+        released_after = None
+        while time.monotonic() - cut_at < cut_s:
+            if released_after is None and not [
+                    t for t in leased_to(sessions, "w0-") if t[0] == tile_id]:
+                released_after = time.monotonic() - cut_at
+            time.sleep(0.1)
+        # Whether the coordinator gave the cut worker's tile up during the cut, and when.
+        figures["tile_released_after_s"] = (None if released_after is None
+                                            else round(released_after, 3))
+        base = stored_by(sessions, exploration_id, "w0-")
+        others_during = stored_by(sessions, exploration_id, "w1-")
+        ns.restore(0)
+        restored_at = time.monotonic()
+        figures["cut_worker_progress_after_restore_s"] = round(_progress(
+            sessions, exploration_id, base, restored_at, 120, "w0-"), 3)
+        figures["other_worker_poses_stored_by_restore"] = others_during
+        _finish(sessions, exploration_id, 300, run.children)
+        figures["finish_after_restore_s"] = round(time.monotonic() - restored_at, 3)
+        figures["refused_stale_batches"] = run.children[1].output().count("the lease is gone")
+    return run.report()
 
 
 def router_restart(work: Path, down_s: float, *, dtheta_deg: float = 30.0,
@@ -168,21 +188,17 @@ def router_restart(work: Path, down_s: float, *, dtheta_deg: float = 30.0,
     two workers clients of it. The router is killed (-9) mid-run and started again on the same
     port after `down_s`."""
     url = f"sqlite:///{work / 'coordinator.db'}"
-    db.upgrade(url)
-    engine, sessions = _sessions(url)
-    exploration_id = submit(sessions, dtheta_deg, tile_poses)
     router_endpoint = f"tcp/127.0.0.1:{free_port()}"
-    children: list[Child] = []
-    figures: dict[str, Any] = {"down_s": down_s}
-    try:
+    with _scenario(url, dtheta_deg, tile_poses, down_s=down_s) as run:
+        sessions, exploration_id, figures = run.sessions, run.exploration_id, run.figures
         router = Child(router_args(router_endpoint), work / "router.log")
-        children.append(router)
-        children.append(Child(coordinator_args(url, free_port(), mode="client",
-                                               connect=[router_endpoint]),
-                              work / "coordinator.log"))
+        run.children.append(router)
+        run.children.append(Child(coordinator_args(url, free_port(), mode="client",
+                                                   connect=[router_endpoint]),
+                                  work / "coordinator.log"))
         for i in range(2):
-            children.append(Child(worker_args(router_endpoint, f"w{i}", work / "cache",
-                                              pose_s=pose_s), work / f"worker{i}.log"))
+            run.children.append(Child(worker_args(router_endpoint, f"w{i}", work / "cache",
+                                                  pose_s=pose_s), work / f"worker{i}.log"))
         total = tally(sessions, exploration_id).planned
         wait_for(lambda: stored(sessions, exploration_id) >= total // 4, STARTUP_S,
                  "a quarter of the poses")
@@ -195,15 +211,10 @@ def router_restart(work: Path, down_s: float, *, dtheta_deg: float = 30.0,
         restarted_at = time.monotonic()
         figures["progress_after_restart_s"] = round(_progress(
             sessions, exploration_id, base, restarted_at, 180), 3)
-        _finish(sessions, exploration_id, 300, children)
+        _finish(sessions, exploration_id, 300, run.children)
         figures["finish_after_restart_s"] = round(time.monotonic() - restarted_at, 3)
         figures["outage_s"] = round(restarted_at - killed_at, 3)
-        _stop_all(children)
-    finally:
-        _stop_all(children)
-        result = tally(sessions, exploration_id)
-        engine.dispose()
-    return {"figures": figures, "tally": asdict(result), "complete": result.complete}
+    return run.report()
 
 
 def postgres_restart(work: Path, down_s: float, *, dtheta_deg: float = 30.0,
@@ -211,45 +222,36 @@ def postgres_restart(work: Path, down_s: float, *, dtheta_deg: float = 30.0,
     """The coordinator on a PostgreSQL cluster of this run's own (another port; the shared
     server is never touched), two workers on loopback. The cluster is stopped (`pg_ctl -m
     fast`: every connection closed) mid-run and started again after `down_s`."""
-    children: list[Child] = []
-    figures: dict[str, Any] = {"down_s": down_s}
-    with pg_cluster(free_port()) as cluster:
-        db.upgrade(cluster.url)
-        engine, sessions = _sessions(cluster.url)
-        exploration_id = submit(sessions, dtheta_deg, tile_poses)
+    with (pg_cluster(free_port()) as cluster,
+          _scenario(cluster.url, dtheta_deg, tile_poses, down_s=down_s) as run):
+        sessions, exploration_id, figures = run.sessions, run.exploration_id, run.figures
         api = free_port()
         zenoh_endpoint = f"tcp/127.0.0.1:{free_port()}"
-        try:
-            children.append(Child(coordinator_args(cluster.url, api, listen=[zenoh_endpoint]),
+        run.children.append(Child(coordinator_args(cluster.url, api, listen=[zenoh_endpoint]),
                                   work / "coordinator.log"))
-            for i in range(2):
-                children.append(Child(worker_args(zenoh_endpoint, f"w{i}", work / "cache",
+        for i in range(2):
+            run.children.append(Child(worker_args(zenoh_endpoint, f"w{i}", work / "cache",
                                                   pose_s=pose_s), work / f"worker{i}.log"))
-            total = tally(sessions, exploration_id).planned
-            wait_for(lambda: stored(sessions, exploration_id) >= total // 4, STARTUP_S,
-                     "a quarter of the poses")
-            base = stored(sessions, exploration_id)
-            engine.dispose()
-            cluster.stop("fast")
-            stopped_at = time.monotonic()
-            figures["healthz_while_down"] = _healthz(api)
-            time.sleep(down_s)
-            cluster.start()
-            started_at = time.monotonic()
-            figures["outage_s"] = round(started_at - stopped_at, 3)
-            wait_for(lambda: _healthz(api) == 200, 60, "the coordinator's /healthz")
-            figures["healthz_ok_after_start_s"] = round(time.monotonic() - started_at, 3)
-            figures["progress_after_start_s"] = round(_progress(
-                sessions, exploration_id, base, started_at, 180), 3)
-            _finish(sessions, exploration_id, 300, children)
-            figures["finish_after_start_s"] = round(time.monotonic() - started_at, 3)
-            figures["coordinator_alive"] = children[0].alive()
-            _stop_all(children)
-        finally:
-            _stop_all(children)
-            result = tally(sessions, exploration_id)
-            engine.dispose()
-    return {"figures": figures, "tally": asdict(result), "complete": result.complete}
+        total = tally(sessions, exploration_id).planned
+        wait_for(lambda: stored(sessions, exploration_id) >= total // 4, STARTUP_S,
+                 "a quarter of the poses")
+        base = stored(sessions, exploration_id)
+        run.engine.dispose()
+        cluster.stop("fast")
+        stopped_at = time.monotonic()
+        figures["healthz_while_down"] = _healthz(api)
+        time.sleep(down_s)
+        cluster.start()
+        started_at = time.monotonic()
+        figures["outage_s"] = round(started_at - stopped_at, 3)
+        wait_for(lambda: _healthz(api) == 200, 60, "the coordinator's /healthz")
+        figures["healthz_ok_after_start_s"] = round(time.monotonic() - started_at, 3)
+        figures["progress_after_start_s"] = round(_progress(
+            sessions, exploration_id, base, started_at, 180), 3)
+        _finish(sessions, exploration_id, 300, run.children)
+        figures["finish_after_start_s"] = round(time.monotonic() - started_at, 3)
+        figures["coordinator_alive"] = run.children[0].alive()
+    return run.report()
 
 
 def _healthz(port: int) -> int | None:
