@@ -261,12 +261,10 @@ class Owners:
             self.point.update(zip(keys.tolist(), known, strict=True))
             own_emb = grid.embedding[own_pos]
             near = self.tree.query_ball_point(own_emb, self.rho * (1 + 1e-9))
-            far = self.far[a]
-            if len(far):  # only those the batch may be nearer to than their owner
-                dist, _ = cKDTree(own_emb).query(grid.embedding[far], k=1)
-                far = far[dist ** 2 <= self.d2[far * n_a + a] + 1e-9]
+            # and every far one: while a sweep covers the lattice, the batch is nearer to
+            # most of them than their owner (a first pass to sort them out costs more).
             cand = np.unique(np.concatenate([np.concatenate([np.asarray(x, dtype=np.int64)
-                                                             for x in near]), far]))
+                                                             for x in near]), self.far[a]]))
             idx, d2 = nearest_known(grid, known, cand)
             f = cand * n_a + a
             cur, old, q = self.d2[f], self.owner[f], keys[idx]

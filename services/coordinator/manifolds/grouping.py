@@ -225,7 +225,7 @@ def sq_dist(fine: np.ndarray, sample: np.ndarray) -> np.ndarray:
                     + d[..., 3] * d[..., 3], 12)
 
 
-_K = 8  # nearest candidates asked of the tree; more only where the 8th may tie
+_K = 8  # nearest candidates asked of the tree where the 2nd nearest may tie; more where the 8th may
 
 
 def nearest_known(grid: FineGrid, known: list[Point],
@@ -238,22 +238,36 @@ def nearest_known(grid: FineGrid, known: list[Point],
     emb = grid.embedding if positions is None else grid.embedding[positions]
     own = grid.embedding[[grid.position(p) for p in known]]
     tree = cKDTree(own)
-    k = min(_K, len(known))
+    # The two nearest first: where the second is clearly farther than the first, no pose
+    # can tie with the nearest (most positions); the others ask for more.
+    best, best_d2, unsure = _nearest_of(tree, own, emb, min(2, len(known)))
+    if unsure is not None and len(unsure):
+        best[unsure], best_d2[unsure], unsure_8 = _nearest_of(
+            tree, own, emb[unsure], min(_K, len(known)))
+        if unsure_8 is not None:  # a pose beyond the 8th may tie with the nearest: ask all
+            for f in unsure[unsure_8].tolist():
+                cand = np.array(tree.query_ball_point(emb[f], math.sqrt(best_d2[f]) + 1e-6))
+                cd2 = sq_dist(emb[f], own[cand])
+                j = np.lexsort((cand, cd2))[0]
+                best[f], best_d2[f] = cand[j], cd2[j]
+    return best, best_d2
+
+
+def _nearest_of(tree: cKDTree, own: np.ndarray, emb: np.ndarray, k: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The nearest of the k the tree finds (smallest `sq_dist`, ties to the smaller index)
+    and the rows where one beyond the k-th may tie with it (None: k is every pose)."""
     dist, idx = tree.query(emb, k=k)
     if k == 1:
         idx = np.asarray(idx, dtype=np.int64)
-        return idx, sq_dist(emb, own[idx])
+        return idx, sq_dist(emb, own[idx]), None
     d2 = sq_dist(emb[:, None, :], own[idx])
     order = np.lexsort((idx, d2), axis=-1)[:, 0]
     rows = np.arange(len(emb))
     best, best_d2 = idx[rows, order], d2[rows, order]
-    if k < len(known):  # a pose beyond the k-th may tie with the nearest: ask for all
-        for f in np.flatnonzero(dist[:, -1] ** 2 - best_d2 <= 4e-12):
-            cand = np.array(tree.query_ball_point(emb[f], math.sqrt(best_d2[f]) + 1e-6))
-            cd2 = sq_dist(emb[f], own[cand])
-            j = np.lexsort((cand, cd2))[0]
-            best[f], best_d2[f] = cand[j], cd2[j]
-    return best, best_d2
+    if k == len(own):
+        return best, best_d2, None
+    return best, best_d2, np.flatnonzero(dist[:, -1] ** 2 - best_d2 <= 4e-12)
 
 
 def fine_labels(
