@@ -30,10 +30,10 @@ def test_each_shipped_gripper_holds_the_sphere(make_evaluator, name: str) -> Non
     assert len(fingers) >= 2
 
 
-@pytest.mark.parametrize("name", ["franka_hand", "pr2_gripper", "robotiq_3f_urdf"])
+@pytest.mark.parametrize("name", ["franka_hand", "pr2_gripper", "robotiq_3f_urdf", "wsg50"])
 def test_the_haptic_policy_runs_unchanged_on_urdf_grippers(make_evaluator, name: str) -> None:
     """G_s senses the palm and every actuated link and moves the actuated joints; a coupled
-    finger moves with its driver through the gear. (The WSG-50 makes no contact: docs.)"""
+    finger moves with its driver through the gear (the WSG-50's second jaw is one)."""
     evaluator = make_evaluator("sphere", gripper=name,
                                settings=SimSettings(policy_name="haptic"))
     result = evaluator.evaluate(Pose(theta=math.pi / 2, phi=0.0, r=0.02, roll=math.pi / 2))
