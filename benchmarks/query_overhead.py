@@ -1,5 +1,5 @@
 """Server CPU per request of the kept read routes and paged /poses, an earlier commit against this
-checkout, interleaved on one SQLite map (issue 21: the framework's share of a read).
+checkout, interleaved on one 10k map, SQLite or PostgreSQL (issue 21: the framework's share).
 
 bench_query.py's 48 requests per route measure a ~1.5 ms route to ±0.2 ms (the process's CPU
 time comes in 10 ms ticks); this sends CLIENTS × --per-client requests per route and server, and
@@ -9,6 +9,7 @@ bench_query.
 
     .venv/bin/python benchmarks/query_overhead.py --before-code DIR [--keep DIR]
         [--per-client 40] [--rounds 2] [--before-stack plain] [--stack-ab] [--client-ab]
+        [--postgresql --pg-db NAME] [--results NAME]
 
 DIR: an earlier commit unpacked (`git archive REF | tar -x -C DIR`); its server runs from there
 (tag `before`, on uvicorn's --before-stack: auto = uvloop and httptools, plain = asyncio and
@@ -72,6 +73,9 @@ def main() -> int:
     parser.add_argument("--stack-ab", action="store_true")
     parser.add_argument("--client-ab", action="store_true")
     parser.add_argument("--client", choices=["http.client", "httpx"], default="http.client")
+    parser.add_argument("--postgresql", action="store_true",
+                        help="the 10k map on PostgreSQL (bench_query's schema q_10k in --pg-db)")
+    parser.add_argument("--pg-db", default="bench_query")
     args = parser.parse_args()
     variants: list[tuple[str, Path | None, str, str]] = [
         ("before", args.before_code, args.before_stack, args.client)]
@@ -83,12 +87,18 @@ def main() -> int:
 
     path = args.keep / "query_10k.db"  # bench_query's name for its 10k SQLite map
     url = f"sqlite:///{path}"
+    if args.postgresql:  # bench_query's 10k PostgreSQL schema, in --pg-db
+        bq.PG_DB = args.pg_db
+        url = bq._pg_url("10k", False)
     figures: dict[str, float] = {"load_avg_1min_start": bq._load(), "clients": bq.CLIENTS,
                                  "requests_per_route_per_server_and_round":
                                      bq.CLIENTS * args.per_client, "rounds": args.rounds}
     if bq._pose_count(url) == 0:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.unlink(missing_ok=True)
+        if args.postgresql:
+            url = bq._pg_url("10k", True)
+        else:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.unlink(missing_ok=True)
         bq.build(url, bq.SIZES["10k"])
     from graspscape.services.coordinator import db
 
@@ -114,8 +124,10 @@ def main() -> int:
         figures[f"{name}_p50_ms_{tag}"] = round(float(np.percentile(latency[(name, tag)], 50)), 1)
         figures[f"{name}_p95_ms_{tag}"] = round(float(np.percentile(latency[(name, tag)], 95)), 1)
     figures["load_avg_1min_end"] = bq._load()
+    backend = "PostgreSQL" if args.postgresql else "SQLite"
     write_results(args.results, figures, extra={"note": (
-        "servers alternated per round on the same 10k SQLite map (bench_query's builder): "
+        f"servers alternated per round on the same 10k {backend} map (bench_query's "
+        "builder): "
         + "; ".join(f"{tag}: {'--before-code' if code else 'this checkout'}, uvicorn "
                     f"{'/'.join(bq.STACKS[stack])}, {client} clients"
                     for tag, code, stack, client in variants)
