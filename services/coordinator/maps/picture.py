@@ -4,50 +4,78 @@
 The picture is drawn from the stored manifold table (brought up to date first, as every read
 does) and the poses' stored labels (`maps.points`), never by regrouping every pose on read;
 the bytes are kept for the last few (exploration, its version, cut) asked for, since a
-finished map does not change. A finished map's default picture is drawn ahead and stored
-(maps/stored.py), so its first read in a process is a row read.
+finished map does not change. A finished map's default picture, and a running map's after a
+refresh, are drawn ahead and stored (maps/stored.py), so their first read in a process is a
+row read while the version matches.
+
+What a picture is drawn from — the poses' arrays and the manifold table, ~0.2 s of reading at
+100k poses and seconds at 1M — is kept for the last INPUT_VERSIONS map versions, so another
+cut, φ0, r or attitude of the same version reads nothing again; and one drawing per picture
+at a time: a request for a picture being drawn waits for it instead of drawing it too (the
+8 clients of one page ask for the same picture at once), and the default picture waits for
+its draw-ahead in flight.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import threading
 from collections import OrderedDict
 from pathlib import Path
 from typing import Literal
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.lattice import Lattice
+from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.maps.points import MapPoints
 from graspscape.services.coordinator.store.models import ExplorationRow
 from sqlalchemy.orm import Session
 
 Cut = Literal["horizontal", "vertical"]
 CACHED_PICTURES = 16
+INPUT_VERSIONS = 2  # a 1M-pose map's arrays are ~60 MB
 _cache: OrderedDict[tuple[object, ...], tuple[bytes, int, int]] = OrderedDict()
+_inputs: OrderedDict[tuple[object, ...], tuple[MapPoints, list[ManifoldSummary]]] = OrderedDict()
+_lock = threading.Lock()  # the two caches and _drawing, across the server's threads
+_drawing: dict[tuple[object, ...], threading.Lock] = {}
 
 
 def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "svg"], *,
                   cut: Cut = "horizontal", phi0_deg: float = 0.0, attitude: int = 0,
-                  title: str | None = None, r_mm: float | None = None
+                  title: str | None = None, r_mm: float | None = None, ensure: bool = True
                   ) -> tuple[bytes, int, int]:
     """The map (PNG or SVG) with its manifold and lattice pose counts; `r_mm`: only the cut's
-    band at that r (snapped to the nearest level of the finest lattice; None: every r).
+    band at that r (snapped to the nearest level of the finest lattice; None: every r);
+    `ensure=False`: the stored table as it is, not brought up to date first.
     Raises NotFound, InvalidInput (an attitude or r the grid does not have)."""
     from graspscape.services.coordinator.exploration.samples import lattice_of
     from graspscape.services.coordinator.exploration.specs import spec_of
-    from graspscape.services.coordinator.manifolds.service import (
-        ensure_manifolds,
-        stored_manifolds,
-    )
-    from graspscape.services.coordinator.maps.points import stored_points
+    from graspscape.services.coordinator.manifolds.service import ensure_manifolds
     from graspscape.services.coordinator.maps.render import render_map
-    from graspscape.services.coordinator.maps.stored import default_title, stored_default
+    from graspscape.services.coordinator.maps.stored import (
+        default_title,
+        in_flight,
+        stored_default,
+    )
     from graspscape.services.coordinator.objects.geometry import object_mesh
 
-    ensure_manifolds(session, exploration_id)
+    if ensure:
+        ensure_manifolds(session, exploration_id)
+    waited = False
+    if (fmt, cut, phi0_deg, attitude, title, r_mm) == (
+            "png", "horizontal", 0.0, 0, default_title(exploration_id), None):
+        # The default picture: its draw-ahead in flight (maybe started by the refresh just
+        # made) is waited for, not drawn a second time beside it; it is then the stored one.
+        thread = in_flight(session.get_bind(), exploration_id)
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(DRAW_AHEAD_WAIT_S)
+            waited = True
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
+    if waited:
+        session.refresh(row)  # the version as the draw-ahead's commit left it
     spec = spec_of(row)
     lattice = lattice_of(spec)
     if attitude >= len(lattice.attitudes):
@@ -58,28 +86,69 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
     if title is None:
         title = f"{spec.label or ''}".strip()
     # The version of what is drawn: the poses and the manifold table stored for them.
-    key = (str(session.get_bind().url), exploration_id, row.created_at, row.updated_at,
-           row.poses_done, row.manifolds_poses_done, row.manifolds_final, fmt, cut, phi0_deg,
-           attitude, title, r_level)
-    if key in _cache:
-        _cache.move_to_end(key)
-        return _cache[key]
-    if (fmt, cut, phi0_deg, attitude, title, r_level) == (
-            "png", "horizontal", 0.0, 0, default_title(exploration_id), None):
-        # The default picture of a finished map, drawn ahead (maps/stored.py).
-        stored = stored_default(session, row)
-        if stored is not None:
-            _cache[key] = stored
-            return stored
-    points = stored_points(session, exploration_id, lattice)
-    manifolds = stored_manifolds(session, exploration_id)
-    data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),
-                      cut=cut, phi0=math.radians(phi0_deg), attitude=attitude, fmt=fmt,
-                      title=title, r_level=r_level)
-    _cache[key] = (data, len(manifolds), len(points))
-    while len(_cache) > CACHED_PICTURES:
-        _cache.popitem(last=False)
-    return _cache[key]
+    version = (str(session.get_bind().url), exploration_id, row.created_at, row.updated_at,
+               row.poses_done, row.manifolds_poses_done, row.manifolds_final)
+    key = (*version, fmt, cut, phi0_deg, attitude, title, r_level)
+    if (found := _kept(key)) is not None:
+        return found
+    with _lock:
+        drawing = _drawing.setdefault(key, threading.Lock())
+    with drawing:  # one drawing of a picture at a time; the others then find it kept
+        if (found := _kept(key)) is not None:
+            return found
+        try:
+            # The default picture, drawn ahead (maps/stored.py).
+            if (fmt, cut, phi0_deg, attitude, title, r_level) == (
+                    "png", "horizontal", 0.0, 0, default_title(exploration_id), None) and (
+                    stored := stored_default(session, row)) is not None:
+                return _keep(key, stored)
+            points, manifolds = _drawn_from(session, version, exploration_id, lattice)
+            data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),
+                              cut=cut, phi0=math.radians(phi0_deg), attitude=attitude,
+                              fmt=fmt, title=title, r_level=r_level, panel_key=version)
+            return _keep(key, (data, len(manifolds), len(points)))
+        finally:
+            with _lock:
+                _drawing.pop(key, None)
+
+
+DRAW_AHEAD_WAIT_S = 60.0
+
+
+def _kept(key: tuple[object, ...]) -> tuple[bytes, int, int] | None:
+    with _lock:
+        found = _cache.get(key)
+        if found is not None:
+            _cache.move_to_end(key)
+        return found
+
+
+def _keep(key: tuple[object, ...], value: tuple[bytes, int, int]) -> tuple[bytes, int, int]:
+    with _lock:
+        _cache[key] = value
+        while len(_cache) > CACHED_PICTURES:
+            _cache.popitem(last=False)
+    return value
+
+
+def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: int,
+                lattice: Lattice) -> tuple[MapPoints, list[ManifoldSummary]]:
+    """The poses' arrays and the manifold table at `version`, read once per version."""
+    from graspscape.services.coordinator.manifolds.service import stored_manifolds
+    from graspscape.services.coordinator.maps.points import stored_points
+
+    with _lock:
+        found = _inputs.get(version)
+        if found is not None:
+            _inputs.move_to_end(version)
+            return found
+    found = (stored_points(session, exploration_id, lattice),
+             stored_manifolds(session, exploration_id))
+    with _lock:
+        _inputs[version] = found
+        while len(_inputs) > INPUT_VERSIONS:
+            _inputs.popitem(last=False)
+    return found
 
 
 def r_level_of(lattice: Lattice, r_mm: float) -> float:

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import io
 import math
+import threading
+from collections.abc import Hashable
 from typing import Any, Literal
 
 import matplotlib
@@ -37,6 +39,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
     surface_radii,
 )
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.maps.panel import reuse_panel
 from graspscape.services.coordinator.maps.points import ROBUST_CODES, MapPoints
 from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
@@ -274,9 +277,27 @@ def render_map(
     title: str = "",
     pixels: int = PIXELS,
     r_level: float | None = None,
+    panel_key: Hashable | None = None,
 ) -> bytes:
+    """The picture; `panel_key`: the map version, under which a PNG's 3D view is kept and put
+    back in later renders of that version where that is exact (maps/panel.py)."""
     field = cut_field(lattice, points, mesh, cut=cut, phi0=phi0,
                       attitude=attitude, pixels=pixels, r_level=r_level)
+    with _drawing:
+        return _figure(field, lattice, points, manifolds, mesh, cut=cut, phi0=phi0,
+                       attitude=attitude, fmt=fmt, title=title, r_level=r_level,
+                       panel_key=panel_key)
+
+
+# One figure at a time per process: pyplot's figure registry and mathtext's parser are not
+# thread-safe (two pictures drawn at once in the server's threads can fail to parse a label).
+_drawing = threading.Lock()
+
+
+def _figure(field: dict[str, Any], lattice: Lattice, points: MapPoints,
+            manifolds: list[ManifoldSummary], mesh: Any | None, *, cut: Cut, phi0: float,
+            attitude: int, fmt: Literal["png", "svg"], title: str, r_level: float | None,
+            panel_key: Hashable | None) -> bytes:
     fig = plt.figure(figsize=(12, 5.6))
     ax = fig.add_subplot(1, 2, 1)
     roll = lattice.attitudes[attitude][0]
@@ -287,6 +308,8 @@ def render_map(
               f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     _draw_3d(ax3, lattice, points, mesh)
+    if panel_key is not None and fmt == "png":
+        reuse_panel(ax, ax3, panel_key)
     large = [m for m in manifolds if m.large]
     dust = [m for m in manifolds if not m.large]
     shown = large[:LEGEND_ENTRIES]
@@ -312,7 +335,35 @@ def render_map(
     if handles:
         fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), fontsize=8)
     fig.tight_layout(rect=(0, 0.08, 1, 1))
+    # tight_layout leaves a placeholder layout engine behind, for which savefig first draws
+    # the whole figure once without rendering (~30 % of a render); the layout is done.
+    fig.set_layout_engine(None)
     buf = io.BytesIO()
     fig.savefig(buf, format=fmt, dpi=110)
     plt.close(fig)
     return buf.getvalue()
+
+
+def warm_up() -> None:
+    """Draw a small made-up map once: a process's first picture costs ~0.2 s of CPU more than
+    the next (fonts, mathtext, the 3D axes' first use), which a first read of a map after a
+    restart would pay otherwise. The coordinator runs it in a background thread at start."""
+    from graspscape.services.coordinator.exploration.lattice import Point
+    from graspscape.services.coordinator.manifolds.summary import PoseBrief
+    from graspscape.shared.specs.exploration import PoseGridSpec
+
+    lattice = Lattice(PoseGridSpec(dtheta=math.radians(45), r_min=0.0, r_max=0.02, dr=0.01), 1)
+    pts = sorted((K, J, i, 0) for K, J in lattice.cells(1) for i in range(lattice.n_r + 1))
+    ring, az, ri, att = (np.array(c) for c in zip(*pts, strict=True))
+    phi = np.array([lattice.pose(Point(*p)).phi for p in pts])
+    label = (phi >= math.pi).astype(np.int64)
+    robust = np.arange(len(pts)) % len(ROBUST_CODES)
+    points = MapPoints(ring, az, ri, att, ri * lattice.dr(1), 0.3 + 0.1 * np.cos(phi),
+                       np.ones(len(pts), dtype=bool), label, robust)
+    brief = PoseBrief(key="0", theta=math.pi / 2, phi=0.0, r=0.0, roll=0.0, pitch=0.0, yaw=0.0,
+                      mu_s=0.4, effort_max_nm=1.0)
+    manifolds = [ManifoldSummary(
+        label=k, name="AB"[k], description="", digits=[], pose_count=1, evaluated_count=1,
+        volume_cm3=1.0, mu_s_min=0.2, mu_s_mean=0.3, mu_s_max=0.4, mu_s_std=0.0, best=brief,
+        local_maxima=[brief]) for k in (0, 1)]
+    render_map(lattice, points, manifolds, None, title="warm-up")

@@ -11,6 +11,14 @@ version still matches, in any coordinator process, also after a restart. Picture
 parameters, and those of running explorations (whose version moves with every ingested
 batch), are drawn on read and kept in the process's memory (maps/picture.py).
 
+A running map's default picture is drawn ahead too, after the commit of a manifold refresh
+(a listener on `explorations.manifolds_poses_done`) and stored the same way: a read between
+that refresh and the next ingested batch (the version moves with `poses_done`) is a row read.
+Refreshes come every 1,000 poses at scale, so a running map is drawn ahead at most once per
+RUNNING_DRAW_INTERVAL_S (a render costs ~1 s of CPU at 100k poses, taken from the ingest's
+process), never refreshes the table itself (`ensure=False`: a batch stored since is the next
+read's), and a request made while a draw is in flight is drawn after it (the final one too).
+
 Maps under PRERENDER_MIN_POSES are not drawn ahead: they render in well under a second, and
 the tests' many small explorations would each start a render.
 """
@@ -18,7 +26,9 @@ the tests' many small explorations would each start a render.
 from __future__ import annotations
 
 import logging
+import math
 import threading
+import time
 from typing import Any
 
 from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
@@ -28,8 +38,11 @@ from sqlalchemy.orm import Session, object_session
 log = logging.getLogger("graspscape.coordinator.maps")
 
 PRERENDER_MIN_POSES = 2_000
+RUNNING_DRAW_INTERVAL_S = 30.0
 _lock = threading.Lock()
 _running: dict[tuple[str, int], threading.Thread] = {}
+_again: set[tuple[str, int]] = set()  # asked for while its draw was in flight
+_last_running_draw: dict[tuple[str, int], float] = {}  # monotonic start of the last one
 
 
 def default_title(exploration_id: int) -> str:
@@ -53,15 +66,17 @@ def stored_default(session: Session, row: ExplorationRow) -> tuple[bytes, int, i
     return None if found is None else (bytes(found[0]), int(found[1]), int(found[2]))
 
 
-def store_default(session: Session, exploration_id: int) -> None:
-    """Render the default picture at the current version and store it (the caller commits)."""
+def store_default(session: Session, exploration_id: int, *, ensure: bool = True) -> None:
+    """Render the default picture at the current version and store it (the caller commits).
+    `ensure=False`: draw the stored table as it is (a running map's draw-ahead: a refresh is
+    the reads' and the ingest's to make, not a background thread's)."""
     from graspscape.services.coordinator.maps.picture import picture_bytes
 
     # The stored one out first: drawn again, not read back (the process's memory may still
     # hold this version's bytes: then they are the picture).
     session.execute(delete(MapPictureRow).where(MapPictureRow.exploration_id == exploration_id))
     data, manifolds, poses = picture_bytes(session, exploration_id, "png",
-                                           title=default_title(exploration_id))
+                                           title=default_title(exploration_id), ensure=ensure)
     row = session.get(ExplorationRow, exploration_id)
     assert row is not None  # picture_bytes raised NotFound otherwise
     session.add(MapPictureRow(exploration_id=exploration_id, version=version_text(row),
@@ -69,21 +84,30 @@ def store_default(session: Session, exploration_id: int) -> None:
 
 
 def _render(bind: Any, exploration_id: int, key: tuple[str, int]) -> None:
-    try:
-        with Session(bind) as session:
-            store_default(session, exploration_id)
-            session.commit()
-    except Exception:  # a background job: say so, the read renders on demand instead
-        log.warning("exploration %s: the map picture was not drawn ahead", exploration_id,
-                    exc_info=True)
-    finally:
+    while True:
+        try:
+            with Session(bind) as session:
+                row = session.get(ExplorationRow, exploration_id)
+                # A running map whose table is behind its poses: the next refresh draws it.
+                if row is not None and (row.manifolds_final
+                                        or row.manifolds_poses_done == row.poses_done) and (
+                        stored_default(session, row) is None):  # asked twice, one version
+                    store_default(session, exploration_id, ensure=bool(row.manifolds_final))
+                    session.commit()
+        except Exception:  # a background job: say so, the read renders on demand instead
+            log.warning("exploration %s: the map picture was not drawn ahead", exploration_id,
+                        exc_info=True)
         with _lock:
-            _running.pop(key, None)
+            if key not in _again:
+                _running.pop(key, None)
+                return
+            _again.discard(key)
 
 
 def prerender_after_commit(session: Session, exploration_id: int, poses: int) -> None:
-    """Once `session` commits (the refresh to final is then visible to other sessions), draw
-    and store the default picture in a background thread; one at a time per exploration."""
+    """Once `session` commits (the refresh is then visible to other sessions), draw and store
+    the default picture in a background thread; one at a time per exploration (asked for
+    while one is in flight: drawn again after it)."""
     if poses < PRERENDER_MIN_POSES:
         return
     bind = session.get_bind()
@@ -92,6 +116,7 @@ def prerender_after_commit(session: Session, exploration_id: int, poses: int) ->
     def start(_session: Session) -> None:
         with _lock:
             if key in _running:
+                _again.add(key)
                 return
             thread = threading.Thread(target=_render, args=(bind, exploration_id, key),
                                       name=f"map-picture-{exploration_id}", daemon=True)
@@ -101,6 +126,12 @@ def prerender_after_commit(session: Session, exploration_id: int, poses: int) ->
     event.listen(session, "after_commit", start, once=True)
 
 
+def in_flight(bind: Any, exploration_id: int) -> threading.Thread | None:
+    """The thread drawing this exploration's default picture ahead, if one is."""
+    with _lock:
+        return _running.get((str(bind.url), exploration_id))
+
+
 def _final_set(target: ExplorationRow, value: object, _old: object, _initiator: object) -> None:
     if value:
         session = object_session(target)
@@ -108,13 +139,42 @@ def _final_set(target: ExplorationRow, value: object, _old: object, _initiator: 
             prerender_after_commit(session, target.id, target.poses_done or 0)
 
 
+def _refreshed(target: ExplorationRow, value: object, old: object, _initiator: object) -> None:
+    """A running map's refresh: drawn ahead at most once per RUNNING_DRAW_INTERVAL_S."""
+    session = object_session(target)
+    if (session is None or value is None or value == old or target.manifolds_final
+            or (target.poses_done or 0) < PRERENDER_MIN_POSES):
+        return
+    key = (str(session.get_bind().url), target.id)
+    now = time.monotonic()
+    with _lock:
+        if now - _last_running_draw.get(key, -math.inf) < RUNNING_DRAW_INTERVAL_S:
+            return
+        _last_running_draw[key] = now
+    prerender_after_commit(session, target.id, target.poses_done or 0)
+
+
 def draw_finished_maps_ahead() -> None:
     """From now on, in this process, a map noted final (`manifolds_final` set true on its
     row: the final refresh, or a strategy noting the last refresh's table as final) has its
-    default picture drawn and stored after that commit. The coordinator's API turns this on
-    (api/manifolds.py); the local runner, which draws its map itself, does not."""
+    default picture drawn and stored after that commit, and a running map after a refresh
+    (`manifolds_poses_done` set, throttled); and a first picture is drawn now in the
+    background (`render.warm_up`). The coordinator's API turns this on (api/manifolds.py);
+    the local runner, which draws its map itself, does not."""
     if not event.contains(ExplorationRow.manifolds_final, "set", _final_set):
         event.listen(ExplorationRow.manifolds_final, "set", _final_set)
+    if not event.contains(ExplorationRow.manifolds_poses_done, "set", _refreshed):
+        event.listen(ExplorationRow.manifolds_poses_done, "set", _refreshed)
+        threading.Thread(target=_warm_up, name="map-picture-warm-up", daemon=True).start()
+
+
+def _warm_up() -> None:
+    from graspscape.services.coordinator.maps.render import warm_up
+
+    try:
+        warm_up()
+    except Exception:  # the first read pays the first use instead
+        log.warning("the map pictures' warm-up failed", exc_info=True)
 
 
 def wait_prerendered(timeout: float = 120.0) -> None:
