@@ -17,10 +17,14 @@ from graspscape.services.coordinator.store.models import ExplorationRow, ObjectR
 from graspscape.shared.specs.exploration import ConfigurationMatch, ExplorationSpec
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.shared.wire.messages import ObjectRef
-from sqlalchemy import select
+from sqlalchemy import bindparam, select
 from sqlalchemy.orm import Session
 
 _MAX_CACHED = 256
+# Built once and run as Core (each lease reads it): building the statement and the ORM's
+# execution took about a quarter of a lease's CPU.
+_CREATED = select(ExplorationRow.id, ExplorationRow.created_at).where(
+    ExplorationRow.id.in_(bindparam("ids", expanding=True)))
 
 
 @dataclass(frozen=True)
@@ -48,10 +52,8 @@ class WorkContexts:
         """The context of each exploration (one small query, plus one per uncached one)."""
         if not exploration_ids:
             return {}
-        created = dict(session.execute(
-            select(ExplorationRow.id, ExplorationRow.created_at)
-            .where(ExplorationRow.id.in_(exploration_ids))
-        ).all())
+        created = dict(session.connection().execute(
+            _CREATED, {"ids": sorted(exploration_ids)}).all())
         out = {}
         for exploration_id in exploration_ids:
             if exploration_id not in created:
