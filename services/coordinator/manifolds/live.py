@@ -310,12 +310,13 @@ def fine_labels_of(running: RunningMap) -> Any:
     n_a = grid.n_a
     label = {main: i for i, main in enumerate(running.table.mains)}
     owner = running.owners.owner
-    keys = np.unique(owner[owner >= 0])
-    of_key = np.array([NON_VIABLE, *(  # type: ignore[index]
-        label[running.final(p)] if running.samples[p].viable else NON_VIABLE
-        for p in (running.owners.point[k] for k in keys.tolist()))])
-    labels = of_key[np.searchsorted(keys, owner) + 1]
-    labels[owner < 0] = NON_VIABLE
+    owned = owner >= 0
+    keys = np.unique(owner[owned])
+    of_key = np.array([label[running.final(p)]  # type: ignore[index]
+                       if running.samples[p].viable else NON_VIABLE
+                       for p in (running.owners.point[k] for k in keys.tolist())], dtype=int)
+    labels = np.full(len(owner), NON_VIABLE)
+    labels[owned] = of_key[np.searchsorted(keys, owner[owned])]
     points = [Point(K, J, i, a) for K, J in grid.cells for i in range(grid.n_i)
               for a in range(n_a)]
     n_pos = len(grid.weights)
