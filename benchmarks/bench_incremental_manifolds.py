@@ -18,30 +18,43 @@ stored tile by tile through the real ingest (`lease_tiles` + `ingest_results`); 
 since the tile before (after) and cold (the process's maps dropped: every row read, the map
 computed and written whole, as every refresh did before; up to --store-cold-up-to poses).
 
+`--baseline REF`: before each map, the same map measured in a fresh process with the manifolds
+package as it was at git REF (`git archive`): its running-map figures as baseline_*, in
+incremental_manifolds_ab.json.
+
 Run: python -m benchmarks.bench_incremental_manifolds [--maps 10:1,10:4,9:8] [--tiles 8] [--store]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import random
 import shutil
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.manifolds import snapshot
-from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.grouping import components
-from graspscape.services.coordinator.manifolds.live import MapState
-from graspscape.services.coordinator.manifolds.running import RunningMap
-from graspscape.services.coordinator.manifolds.service import radius_function
-from graspscape.services.coordinator.manifolds.summary import build_map
-from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
+MANIFOLDS_AT = "GRASPSCAPE_BENCH_MANIFOLDS"  # a baseline run: the manifolds package's folder
+if os.environ.get(MANIFOLDS_AT):  # before anything imports a module of it
+    import graspscape.services.coordinator.manifolds as _manifolds
+
+    _manifolds.__path__[:] = [os.environ[MANIFOLDS_AT]]
+
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point  # noqa: E402
+from graspscape.services.coordinator.manifolds import snapshot  # noqa: E402
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose  # noqa: E402
+from graspscape.services.coordinator.manifolds.grouping import components  # noqa: E402
+from graspscape.services.coordinator.manifolds.live import MapState  # noqa: E402
+from graspscape.services.coordinator.manifolds.running import RunningMap  # noqa: E402
+from graspscape.services.coordinator.manifolds.service import radius_function  # noqa: E402
+from graspscape.services.coordinator.manifolds.summary import build_map  # noqa: E402
+from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec  # noqa: E402
 
 try:
     from benchmarks._results import write_results
@@ -233,6 +246,22 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
     shutil.rmtree(folder)  # the database and the snapshots: hundreds of MB at 100k poses
 
 
+def baseline(ref: str, item: str, tiles: int) -> dict[str, float]:
+    """One map's running-map figures with the manifolds package of git `ref`, measured in a
+    process of its own."""
+    repo = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as folder:
+        archive = subprocess.run(["git", "archive", ref, "services/coordinator/manifolds"],
+                                 cwd=repo, check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
+        env = {**os.environ, MANIFOLDS_AT: f"{folder}/services/coordinator/manifolds"}
+        out = subprocess.run([sys.executable, "-m", "benchmarks.bench_incremental_manifolds",
+                              "--maps", item, "--tiles", str(tiles), "--json"], cwd=repo,
+                             env=env, check=True, capture_output=True, text=True).stdout
+    got = json.loads(out.strip().splitlines()[-1])
+    return {f"baseline_{k}": v for k, v in got.items() if k.startswith("running_")}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--maps", default="10:1,10:4,9:8",
@@ -244,19 +273,30 @@ def main() -> None:
     parser.add_argument("--store-cold-up-to", type=int, default=20_000,
                         help="time the cold refresh only up to this many poses (it reads, "
                         "computes and writes the whole map: minutes at 100k on a loaded VM)")
+    parser.add_argument("--baseline", metavar="REF",
+                        help="also each map's running-map figures with the manifolds package "
+                        "of git REF, in a fresh process before it")
+    parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     figures: dict[str, float] = {"tile_poses": TILE,
                                  "load_avg_1min_start": round(os.getloadavg()[0], 2)}
     for item in filter(None, args.maps.split(",")):
         dtheta, rolls = item.split(":")
+        if args.baseline:
+            figures.update(baseline(args.baseline, item, args.tiles))
         figures.update(measure(float(dtheta), int(rolls), args.tiles))
+        if args.json:  # a baseline run: the figures only
+            print(json.dumps(figures))
+            return
         print(figures, flush=True)
     if args.store:
         measure_store(figures, args.store_dtheta,
                       tuple(int(x) for x in args.store_marks.split(",") if x),
                       args.store_cold_up_to)
     figures["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
-    write_results("incremental_manifolds", figures, {"note": (
+    # An A/B run has a file of its own: the --store figures of the last full run stay.
+    write_results("incremental_manifolds_ab" if args.baseline else "incremental_manifolds",
+                  figures, {"note": (
         "CPU seconds (process_time) on a shared 2-core machine, keys by the map's poses. "
         "full_*: the whole map at once (grouping.components, then summary.build_map: what a "
         "refresh computed before issue 21's running map, apart from grouping, which was "
@@ -265,7 +305,8 @@ def main() -> None:
         "table equals build_map's. store_refresh_*: one refresh_manifolds on SQLite (this "
         "process's CPU, SQLite included, and wall time) after one more tile of a grid "
         "exploration, with the running map kept (running) and dropped (cold: every row "
-        "read, everything computed and written).")})
+        "read, everything computed and written). baseline_*: the same map measured in a "
+        "fresh process with the manifolds package of --baseline, just before.")})
 
 
 if __name__ == "__main__":
