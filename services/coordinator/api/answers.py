@@ -159,7 +159,8 @@ class KeptRoutes:
 
     def __init__(self, app: ASGIApp) -> None:
         self.app = app
-        self._urls: dict[int, str] = {}  # id(engine) → str(engine.url), the version's first item
+        # The app's engine and str(its url), the version's first item, made once (str: µs).
+        self._url: tuple[Engine, str] | None = None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         match = (_ROUTES.fullmatch(scope["path"])
@@ -169,9 +170,9 @@ class KeptRoutes:
             return
         exploration_id = int(match[1])
         engine: Engine = scope["app"].state.engine
-        url = self._urls.get(id(engine))
-        if url is None:
-            url = self._urls[id(engine)] = str(engine.url)
+        if self._url is None or self._url[0] is not engine:
+            self._url = (engine, str(engine.url))
+        url = self._url[1]
         key = (url, scope["path"], scope["query_string"])
         with _lock:
             kept = _routes.get(key)
