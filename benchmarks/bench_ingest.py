@@ -191,7 +191,16 @@ def _store_batch_at(ref: str) -> Any:
     module = types.ModuleType(f"ingest_at_{ref}")
     sys.modules[module.__name__] = module  # pydantic resolves the models' annotations there
     exec(compile(source, f"ingest.py@{ref}", "exec"), module.__dict__)
-    return module.store_batch
+    if "quiet" in source:
+        return module.store_batch
+    # Older than the scheduler's `quiet` (commit with the counters): called without it, its
+    # result as today's StoredBatch (committed False: the scheduler commits).
+    from graspscape.services.coordinator.store.ingest import StoredBatch
+
+    def store_batch(*args: Any, quiet: Any = None, **kwargs: Any) -> Any:
+        return StoredBatch(*module.store_batch(*args, **kwargs))
+
+    return store_batch
 
 
 def ab_rounds(pg_url: str, *, baseline: str, rounds: int, threads: int, seconds: float,

@@ -61,10 +61,17 @@ def ingest_results(
     Raises what store_batch raises (NotFound, NotLeaseHolder, InvalidInput); a refused batch
     stores nothing."""
     now = now or utcnow()
+
+    def quiet(exploration_id: int, created_at: datetime) -> bool:
+        # after_batch would do nothing (the strategy does not react): the store may commit
+        # with the counter update, one round trip less under the exploration's row lock.
+        return not strategy_for(stored_spec(session, exploration_id, created_at)).reacts
+
     stored = store_batch(session, tile_id=tile_id, lease_epoch=lease_epoch, worker_id=worker_id,
-                         results=results, final=final, now=now)
-    after_batch(session, stored, results, now)
-    session.commit()
+                         results=results, final=final, now=now, quiet=quiet)
+    if not stored.committed:
+        after_batch(session, stored, results, now)
+    session.commit()  # nothing left to commit when the store did
     return stored.report
 
 

@@ -21,7 +21,7 @@ otherwise the batch is stored and the report lists the poses still missing.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from datetime import datetime
 from typing import Any, NamedTuple
 
@@ -57,6 +57,7 @@ class StoredBatch(NamedTuple):
     exploration_id: int
     exploration_status: str | None
     exploration_created_at: datetime | None
+    committed: bool = False  # `quiet` said nothing follows: committed with the counters
 
 
 class IngestReport(BaseModel):
@@ -72,8 +73,9 @@ class IngestReport(BaseModel):
 # The statements of every batch, built once (building them took longer than running them).
 _TILE = select(
     TileRow.exploration_id, TileRow.state, TileRow.lease_epoch, TileRow.lease_owner,
-    TileRow.cells, TileRow.r_levels, TileRow.attitudes,
-).where(TileRow.id == bindparam("tile_id"))
+    TileRow.cells, TileRow.r_levels, TileRow.attitudes, ExplorationRow.created_at,
+).join(ExplorationRow, ExplorationRow.id == TileRow.exploration_id).where(
+    TileRow.id == bindparam("tile_id"))
 # Which of some pose keys an exploration has stored (the unique index's own columns).
 _STORED = select(PoseRow.pose_key).where(
     PoseRow.exploration_id == bindparam("exploration_id"),
@@ -135,10 +137,14 @@ def store_batch(
     results: Sequence[PoseResult],
     final: bool = True,
     now: datetime | None = None,
+    quiet: Callable[[int, datetime], bool] | None = None,
 ) -> StoredBatch:
     """Store a batch of results of one tile; with `final`, the tile is finished by it once
     every pose of the tile is stored. The caller commits (exploration/scheduler.py, after
-    asking the exploration's strategy what comes next in the same transaction).
+    asking the exploration's strategy what comes next in the same transaction), unless
+    `quiet(exploration_id, created_at)` says nothing follows the batch in its transaction:
+    then on PostgreSQL the COMMIT goes in the counter update's round trip (`committed`), so
+    the exploration's row lock is held for one round trip and the commit's flush.
 
     Raises NotFound (no such tile), NotLeaseHolder (not from the tile's latest lease) or
     InvalidInput (a result whose key does not match its pose, or a pose not of this tile);
@@ -226,20 +232,24 @@ def store_batch(
     # reads every other tile as committed in the finish check after it (a statement of its
     # own: one that waited on the lock would still read the tiles from before; on PostgreSQL
     # the two go in one round trip, still two statements).
+    commit = quiet is not None and is_postgres(session) and quiet(eid, tile.created_at)
     status, created_at = _count(session, {"exploration_id": eid, "inserted": inserted,
-                                          "viable": viable, "now": now}, finish=moved)
-    return StoredBatch(report, eid, status, created_at)
+                                          "viable": viable, "now": now},
+                                finish=moved, commit=commit)
+    return StoredBatch(report, eid, status, created_at, commit)
 
 
-def _count(session: Session, counted: dict[str, Any], *, finish: bool) -> tuple[str, datetime]:
-    """The counter update, then with `finish` the exploration's finish check; returns the
-    exploration's status and creation time."""
+def _count(session: Session, counted: dict[str, Any], *, finish: bool, commit: bool = False
+           ) -> tuple[str, datetime]:
+    """The counter update, then with `finish` the exploration's finish check, and with
+    `commit` (PostgreSQL only) the COMMIT; returns the exploration's status and creation
+    time."""
     connection = session.connection()
     eid, now = counted["exploration_id"], counted["now"]
-    if finish and is_postgres(session):
-        count, _ = pipeline.run(connection, [
-            _COUNT_PIPED.step(**counted),
-            _FINISH_EXPLORATIONS_PIPED.step(ids_1=eid, now=now)])
+    if (finish or commit) and is_postgres(session):
+        finishing = [_FINISH_EXPLORATIONS_PIPED.step(ids_1=eid, now=now)] if finish else []
+        count, *_ = pipeline.run(connection, [_COUNT_PIPED.step(**counted), *finishing],
+                                 commit=commit)
         row = count.fetchone()
         assert row is not None  # the poses' foreign key: the row exists
         return row[0], row[1]

@@ -51,10 +51,13 @@ class Piped:
         return self.sql, {**self._fixed, **values}
 
 
-def run(connection: Connection, steps: Sequence[Step]) -> list[psycopg.Cursor[Any]]:
+def run(connection: Connection, steps: Sequence[Step], *, commit: bool = False
+        ) -> list[psycopg.Cursor[Any]]:
     """Run the steps in order in the connection's transaction, in one round trip; one cursor
-    each, its rows and rowcount read after. Any failure raises SQLAlchemy's DBAPIError (the
-    transaction is then aborted, as after any failed statement)."""
+    each, its rows and rowcount read after. With `commit`, the transaction's COMMIT goes in
+    the same round trip (the caller's own commit then finds nothing to commit). Any failure
+    raises SQLAlchemy's DBAPIError (the transaction is then aborted, as after any failed
+    statement, and nothing of it is committed)."""
     raw = connection.connection.driver_connection
     assert isinstance(raw, psycopg.Connection), raw
     cursors: list[psycopg.Cursor[Any]] = []
@@ -65,6 +68,9 @@ def run(connection: Connection, steps: Sequence[Step]) -> list[psycopg.Cursor[An
                 cursor = raw.cursor()
                 cursor.execute(sql, params)
                 cursors.append(cursor)
+            if commit:
+                sql, params = "COMMIT", {}
+                raw.commit()
     except psycopg.Error as exc:
         invalidated = raw.broken or raw.closed
         if invalidated:

@@ -421,6 +421,17 @@ def all_but_two_reported(
     return eid, (leased[-2], leased[-1])
 
 
+def never_quiet(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The store never commits with the counters (a strategy that reacts), so that after_batch
+    runs inside the transaction and a test can hold it open there."""
+    store_batch = scheduler_module.store_batch
+
+    def loud(*args: object, **kwargs: object) -> object:
+        return store_batch(*args, **{**kwargs, "quiet": None})  # type: ignore[arg-type]
+
+    monkeypatch.setattr(scheduler_module, "store_batch", loud)
+
+
 def run_overlapped(first: Callable[[], None], second: Callable[[], None],
                    inside: threading.Event, go_on: threading.Event) -> list[BaseException]:
     """Runs `first` (in a thread named "first") until it sets `inside` with its transaction
@@ -465,6 +476,7 @@ def test_the_last_two_tiles_reported_at_once_finish_the_exploration(
             go_on.wait(30)
 
     monkeypatch.setattr(scheduler_module, "after_batch", held_open)
+    never_quiet(monkeypatch)
 
     def report(t: LeasedTile) -> None:
         with sessions() as s:
@@ -500,6 +512,7 @@ def test_a_failure_and_an_ingest_on_the_last_two_tiles_finish_the_exploration(
         go_on.wait(30)
 
     monkeypatch.setattr(scheduler_module, "after_batch", held_open)
+    never_quiet(monkeypatch)
 
     def report() -> None:
         with sessions() as s:
@@ -576,4 +589,30 @@ def test_a_coordinator_killed_before_the_counter_update_leaves_nothing_and_a_res
         report = ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
                                 worker_id="w", results=results)
         assert report.inserted == len(results) and report.tile_moved
+        assert pose_count(s, eid) == exploration(s, eid).poses_done == len(results)
+
+
+def test_a_quiet_batch_commits_with_its_counters_on_postgresql(
+    sessions: sessionmaker[Session],
+) -> None:
+    """`quiet` (nothing follows in the transaction): PostgreSQL commits in the counter
+    update's round trip, so another session sees the rows and counts before the caller's own
+    commit; SQLite leaves the commit to the caller. Either way the caller's commit is safe."""
+    with sessions() as s:
+        eid = make_exploration(s)
+        (t,) = lease_tiles(s, worker_id="w", n=1, lease_seconds=600)
+    results = fake_results(t.poses(), seed=t.tile_id)
+    asked: list[int] = []
+    with sessions() as s:
+        postgres = s.get_bind().dialect.name == "postgresql"
+        stored = ingest_module.store_batch(
+            s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w", results=results,
+            quiet=lambda exploration_id, _: asked.append(exploration_id) or True)
+        assert asked == ([eid] if postgres else []) and stored.committed == postgres
+        assert stored.report.inserted == len(results) and stored.report.tile_moved
+        with sessions() as other:
+            seen = (pose_count(other, eid), exploration(other, eid).poses_done)
+        assert seen == ((len(results), len(results)) if postgres else (0, 0))
+        s.commit()
+    with sessions() as s:
         assert pose_count(s, eid) == exploration(s, eid).poses_done == len(results)
