@@ -15,7 +15,8 @@ A running map's default picture is drawn ahead too, after the commit of a manifo
 (a listener on `explorations.manifolds_poses_done`) and stored the same way: a read between
 that refresh and the next ingested batch (the version moves with `poses_done`) is a row read.
 Refreshes come every 1,000 poses at scale, so a running map is drawn ahead at most once per
-RUNNING_DRAW_INTERVAL_S (a render costs ~1 s of CPU at 100k poses, taken from the ingest's
+RUNNING_DRAW_INTERVAL_S, and no more often than keeps its draws under RUNNING_DRAW_SHARE of
+the time (a draw costs ~1 s of CPU at 100k poses, ~15 s at 1M, taken from the ingest's
 process), never refreshes the table itself (`ensure=False`: a batch stored since is the next
 read's), and a request made while a draw is in flight is drawn after it (the final one too).
 
@@ -39,10 +40,14 @@ log = logging.getLogger("graspscape.coordinator.maps")
 
 PRERENDER_MIN_POSES = 2_000
 RUNNING_DRAW_INTERVAL_S = 30.0
+# And no more often than keeps a running map's draws under this share of the coordinator's
+# time: at 1M poses a draw reads a million rows (~15 s), every 30 s would be half a core.
+RUNNING_DRAW_SHARE = 0.1
 _lock = threading.Lock()
 _running: dict[tuple[str, int], threading.Thread] = {}
 _again: set[tuple[str, int]] = set()  # asked for while its draw was in flight
 _last_running_draw: dict[tuple[str, int], float] = {}  # monotonic start of the last one
+_draw_seconds: dict[tuple[str, int], float] = {}  # how long the last draw-ahead took
 
 
 def default_title(exploration_id: int) -> str:
@@ -85,6 +90,7 @@ def store_default(session: Session, exploration_id: int, *, ensure: bool = True)
 
 def _render(bind: Any, exploration_id: int, key: tuple[str, int]) -> None:
     while True:
+        start = time.monotonic()
         try:
             with Session(bind) as session:
                 row = session.get(ExplorationRow, exploration_id)
@@ -98,6 +104,7 @@ def _render(bind: Any, exploration_id: int, key: tuple[str, int]) -> None:
             log.warning("exploration %s: the map picture was not drawn ahead", exploration_id,
                         exc_info=True)
         with _lock:
+            _draw_seconds[key] = time.monotonic() - start
             if key not in _again:
                 _running.pop(key, None)
                 return
@@ -148,7 +155,8 @@ def _refreshed(target: ExplorationRow, value: object, old: object, _initiator: o
     key = (str(session.get_bind().url), target.id)
     now = time.monotonic()
     with _lock:
-        if now - _last_running_draw.get(key, -math.inf) < RUNNING_DRAW_INTERVAL_S:
+        wait = max(RUNNING_DRAW_INTERVAL_S, _draw_seconds.get(key, 0.0) / RUNNING_DRAW_SHARE)
+        if now - _last_running_draw.get(key, -math.inf) < wait:
             return
         _last_running_draw[key] = now
     prerender_after_commit(session, target.id, target.poses_done or 0)
