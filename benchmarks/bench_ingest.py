@@ -86,7 +86,7 @@ def _explore(sessions: Any, batch: int) -> int:
 
 
 def run_threads(url: str, *, seconds: float, batch: int, threads: int,
-                own_explorations: bool, rate_guess: float = 15_000) -> dict[str, float]:
+                own_explorations: bool, rate_guess: float = 30_000) -> dict[str, float]:
     """K threads storing already made batches at once (see the module's docstring)."""
     db.upgrade(url)
     engine = db.make_engine(url)
