@@ -32,6 +32,7 @@ from graspscape.services.coordinator.api import (
 from graspscape.services.coordinator.api.finite import validation_error_handler
 from graspscape.services.coordinator.errors import CoordinatorError, InvalidInput
 from graspscape.services.coordinator.manifolds import snapshot
+from graspscape.services.coordinator.maps.stored import start_warm_up
 from graspscape.services.coordinator.metrics import Metrics
 from graspscape.services.coordinator.settings import Settings, get_settings
 from graspscape.services.coordinator.store.queue import requeue_expired
@@ -75,9 +76,11 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         )
         await run_in_threadpool(dispatcher.start)
     app.state.dispatcher = dispatcher
+    warm_up = start_warm_up()
     try:
         yield
     finally:
+        await run_in_threadpool(warm_up.join)
         if dispatcher is not None:
             await run_in_threadpool(dispatcher.stop)
         task.cancel()

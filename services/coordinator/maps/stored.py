@@ -126,7 +126,7 @@ def prerender_after_commit(session: Session, exploration_id: int, poses: int) ->
                 _again.add(key)
                 return
             thread = threading.Thread(target=_render, args=(bind, exploration_id, key),
-                                      name=f"map-picture-{exploration_id}", daemon=True)
+                                      name=f"map-picture-{exploration_id}")
             _running[key] = thread
         thread.start()
 
@@ -166,14 +166,29 @@ def draw_finished_maps_ahead() -> None:
     """From now on, in this process, a map noted final (`manifolds_final` set true on its
     row: the final refresh, or a strategy noting the last refresh's table as final) has its
     default picture drawn and stored after that commit, and a running map after a refresh
-    (`manifolds_poses_done` set, throttled); and a first picture is drawn now in the
-    background (`render.warm_up`). The coordinator's API turns this on (api/manifolds.py);
-    the local runner, which draws its map itself, does not."""
+    (`manifolds_poses_done` set, throttled). The coordinator's API turns this on
+    (api/manifolds.py); the local runner, which draws its map itself, does not."""
     if not event.contains(ExplorationRow.manifolds_final, "set", _final_set):
         event.listen(ExplorationRow.manifolds_final, "set", _final_set)
     if not event.contains(ExplorationRow.manifolds_poses_done, "set", _refreshed):
         event.listen(ExplorationRow.manifolds_poses_done, "set", _refreshed)
-        threading.Thread(target=_warm_up, name="map-picture-warm-up", daemon=True).start()
+
+
+def start_warm_up() -> threading.Thread:
+    """Draw a first picture in the background (`render.warm_up`); the app's lifespan starts
+    it and joins it at shutdown. Not at import, and not a daemon: a process that exited while
+    a daemon thread was inside matplotlib aborted ("terminate called without an active
+    exception", 2 of 10 bare `pytest` collections when it was started at import). Once per
+    process: a later app gets the same thread."""
+    global _warm_up_thread
+    with _lock:
+        if _warm_up_thread is None:
+            _warm_up_thread = threading.Thread(target=_warm_up, name="map-picture-warm-up")
+            _warm_up_thread.start()
+        return _warm_up_thread
+
+
+_warm_up_thread: threading.Thread | None = None
 
 
 def _warm_up() -> None:
