@@ -149,7 +149,8 @@ def _accounting(url: str, eid: int) -> dict[str, int]:
 
 
 def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
-        via_router: bool, log: Path | None = None) -> dict[str, float]:
+        via_router: bool, log: Path | None = None,
+        router_args: list[str] | None = None) -> dict[str, float]:
     url, schema = _schema_url()
     try:
         target = max(20 * TILE_POSES, int(n / pose_s * seconds))
@@ -162,7 +163,8 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
             # of one router (a router-mode session in its own process, as the fault tests'),
             # so the coordinator holds a single transport however many workers there are.
             router = subprocess.Popen(
-                [sys.executable, "-m", "tests.faults.router", "--listen", endpoint],
+                [sys.executable, "-m", "tests.faults.router", "--listen", endpoint,
+                 *(router_args or [])],
                 cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
             assert router.stdout is not None
             router.stdout.readline()  # "router listening on ...": it accepts from now on
@@ -190,7 +192,7 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
                      str(min(per_proc, n - first)), str(first), str(pose_s), str(out)],
                     cwd=REPO))
             pids = [coordinator.pid] + ([router.pid] if router is not None else [])
-            samples = _trace(url, eid, pids, timeout)
+            samples = _trace(url, eid, pids, timeout, [proc.pid for proc in fleet])
             for proc in fleet:
                 proc.send_signal(signal.SIGTERM)
             for proc in fleet:
@@ -240,9 +242,17 @@ FROM pg_stat_activity WHERE datname = %s AND pid <> pg_backend_pid()
 """
 
 
-def _trace(url: str, eid: int, pids: list[int], timeout: float) -> list[tuple]:  # type: ignore[type-arg]
+def _machine_busy_s() -> float:
+    """CPU seconds every core of the machine has spent not idle (/proc/stat)."""
+    fields = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    return (sum(fields[:8]) - fields[3] - fields[4]) / os.sysconf("SC_CLK_TCK")
+
+
+def _trace(url: str, eid: int, pids: list[int], timeout: float,
+           fleet_pids: list[int]) -> list[tuple]:  # type: ignore[type-arg]
     """(time, poses done, poses total, CPU s and anonymous kB of each of `pids`: the
-    coordinator, then the router if any, and _ACTIVITY's counts) until done or timeout."""
+    coordinator, then the router if any, _ACTIVITY's counts, the fleet processes' CPU s
+    together, the whole machine's busy CPU s) until done or timeout: where the cores go."""
     samples = []
     deadline = time.monotonic() + timeout
     with psycopg.connect(f"{PG_ADMIN.rsplit('/', 1)[0]}/{PG_DB}", autocommit=True) as conn:
@@ -251,7 +261,8 @@ def _trace(url: str, eid: int, pids: list[int], timeout: float) -> list[tuple]: 
             activity = conn.execute(_ACTIVITY, (PG_DB,)).fetchone()
             samples.append((time.monotonic(), done, total, [_proc_cpu_s(p) for p in pids],
                             [_proc_kb(p, "Anonymous", "smaps_rollup") for p in pids],
-                            activity))
+                            activity, sum(_proc_cpu_s(p) for p in fleet_pids),
+                            _machine_busy_s()))
             if status == "done":
                 break
             time.sleep(0.5)
@@ -264,7 +275,7 @@ def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int]) -> di
     def at(fraction: float):  # type: ignore[no-untyped-def]
         return next((s for s in samples if s[1] >= fraction * total), samples[-1])
 
-    (t0, d0, _, c0, _, _), (t1, d1, _, c1, _, _) = at(0.1), at(0.9)
+    (t0, d0, _, c0, _, _, f0, m0), (t1, d1, _, c1, _, _, f1, m1) = at(0.1), at(0.9)
     steady = [s[5] for s in samples if t0 <= s[0] <= t1] or [samples[-1][5]]
     lease = np.concatenate([t["lease_ms"] for t in tallies]) if tallies else np.zeros(1)
     ack = np.concatenate([t["ack_ms"] for t in tallies]) if tallies else np.zeros(1)
@@ -283,6 +294,10 @@ def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int]) -> di
         f"pg_waiting_exploration_lock_n{n}": round(float(np.mean([a[0] for a in steady])), 2),
         f"pg_committing_n{n}": round(float(np.mean([a[1] for a in steady])), 2),
         f"pg_not_idle_n{n}": round(float(np.mean([a[2] for a in steady])), 2),
+        # Where the machine's cores went meanwhile: the simulated fleet's own processes, and
+        # everything (coordinator, router, PostgreSQL, fleet, the rest of the machine).
+        f"fleet_processes_cores_n{n}": round((f1 - f0) / (t1 - t0), 2) if t1 > t0 else 0.0,
+        f"machine_busy_cores_n{n}": round((m1 - m0) / (t1 - t0), 2) if t1 > t0 else 0.0,
     }
     for i, who in enumerate(["coordinator", "router"][:len(rss_peak_kb)]):
         figures.update({
@@ -323,6 +338,10 @@ def main() -> int:
     parser.add_argument("--via-router", action="store_true",
                         help="workers and coordinator connect to a zenoh router (its own "
                         "process) instead of the coordinator's embedded peer")
+    parser.add_argument("--router-accept-pending", type=int, default=None,
+                        help="the router's transport/unicast/accept_pending (zenoh: 100)")
+    parser.add_argument("--router-max-sessions", type=int, default=None,
+                        help="the router's transport/unicast/max_sessions (zenoh: 1,000)")
     parser.add_argument("--coordinator-log", type=Path, default=None,
                         help="the coordinator's log at info level into PATH.n<N>")
     parser.add_argument("--results", default="fleet",
@@ -331,7 +350,11 @@ def main() -> int:
     figures: dict[str, float] = {"load_avg_1min_start": round(os.getloadavg()[0], 2)}
     for n in (int(x) for x in args.workers.split(",")):
         got = run(n, per_proc=args.per_proc, pose_s=args.pose_s, seconds=args.seconds,
-                  timeout=args.timeout, via_router=args.via_router, log=args.coordinator_log)
+                  timeout=args.timeout, via_router=args.via_router, log=args.coordinator_log,
+                  router_args=[*(["--accept-pending", str(args.router_accept_pending)]
+                                 if args.router_accept_pending else []),
+                               *(["--max-sessions", str(args.router_max_sessions)]
+                                 if args.router_max_sessions else [])])
         print(json.dumps(got), flush=True)
         figures.update(got)
         figures[f"load_avg_1min_after_n{n}"] = round(os.getloadavg()[0], 2)

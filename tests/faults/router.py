@@ -22,14 +22,26 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--listen", action="append", required=True)
     parser.add_argument("--users-file")
+    # zenoh's defaults: at most 100 sessions in their handshake at once and 1,000 sessions in
+    # all (transport/unicast/accept_pending, max_sessions); a fleet of a thousand needs more.
+    parser.add_argument("--accept-pending", type=int)
+    parser.add_argument("--max-sessions", type=int)
     args = parser.parse_args()
     config: dict = {
         "mode": "router",
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         "listen": {"endpoints": args.listen},
     }
+    transport: dict = {}
     if args.users_file:
-        config["transport"] = {"auth": {"usrpwd": {"dictionary_file": args.users_file}}}
+        transport["auth"] = {"usrpwd": {"dictionary_file": args.users_file}}
+    unicast = {key: value for key, value in (("accept_pending", args.accept_pending),
+                                             ("max_sessions", args.max_sessions))
+               if value is not None}
+    if unicast:
+        transport["unicast"] = unicast
+    if transport:
+        config["transport"] = transport
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     session = zenoh.open(zenoh.Config.from_json5(json.dumps(config)))
