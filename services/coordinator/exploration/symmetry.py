@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from graspscape.services.coordinator.objects.geometry import MESH_QUERIES
 from graspscape.shared.specs.gripper import AnyGripperSpec, GripperSpec
 from graspscape.shared.specs.pose import Pose
 from scipy.spatial.transform import Rotation
@@ -81,7 +82,8 @@ def detect(mesh: Any, *, samples: int = 800, seed: int = 0) -> list[Symmetry]:
     found = []
     for sym in candidates:
         moved = points @ sym.matrix().T
-        _, dist, _ = trimesh.proximity.closest_point(mesh, moved)
+        with MESH_QUERIES:  # a cached mesh's lazy rtree is not thread-safe (objects/geometry)
+            _, dist, _ = trimesh.proximity.closest_point(mesh, moved)
         if float(dist.max()) <= tol:
             found.append(sym)
     return found

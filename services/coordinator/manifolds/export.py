@@ -51,7 +51,7 @@ MEDIA_TYPES: dict[PoseFormat, str] = {"csv": "text/csv",
 def _cells(labels: dict[int, str], dialect: str, *, for_csv: bool) -> tuple[Any, ...]:
     """The export's columns computed by the database, in COLUMNS order, so that a row
     leaves the driver as the tuple the writer takes and no Python runs per row: the JSON
-    columns as their stored text (written once at ingest, see store/ingest._json_text), the
+    columns as their stored text (written once at ingest, see store/pose_rows._json_text), the
     manifold's letters and the source by CASE, the digits in contact from the signature's
     JSON. Decoding and encoding the JSON again per row was two thirds of an export's time."""
     # The digits in contact: the signature's `links_in_contact` array, '["palm","finger_1"]'

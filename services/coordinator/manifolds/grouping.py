@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import string
-import threading
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -25,6 +24,7 @@ from functools import partial
 import numpy as np
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
+from graspscape.services.coordinator.objects.geometry import MESH_QUERIES
 from scipy.spatial import cKDTree
 
 NON_VIABLE = -1
@@ -147,19 +147,12 @@ def speck_neighbours(lattice: Lattice, p: Point) -> list[Point]:
             for _, q in lattice.neighbours(p, level)]
 
 
-# One ray query at a time per process: trimesh builds the mesh's rtree lazily and libspatialindex
-# is not thread-safe; a map picture drawn ahead in a background thread and another drawn on read
-# (or a manifold refresh in an ingest thread) queried one cached mesh at once and the process
-# died with a segmentation fault inside rtree (tests/services/coordinator/maps -m slow, 3 of 3).
-_RAYS = threading.Lock()
-
-
 def surface_radii(mesh: object | None, directions: np.ndarray, fallback: float) -> np.ndarray:
     """Distance from the centre of mass to the outermost surface point along each direction."""
     if mesh is None:
         return np.full(len(directions), fallback)
     origins = np.zeros_like(directions)
-    with _RAYS:
+    with MESH_QUERIES:  # trimesh's lazy rtree is not thread-safe (objects/geometry.py)
         locations, index_ray, _ = mesh.ray.intersects_location(origins, directions)  # type: ignore[attr-defined]
     out = np.full(len(directions), fallback)
     if len(locations):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +53,14 @@ def object_spec(row: ObjectRow, cache_dir: Path) -> ObjectSpec:
             path.write_bytes(row.mesh)
         return ObjectSpec(mesh_path=str(path), **props)
     return ObjectSpec(name=row.name, **props)
+
+
+# The meshes below are cached and shared by every thread of the process, and trimesh builds a
+# mesh's spatial index (rtree / libspatialindex) lazily and queries it without a lock: two
+# threads querying one mesh at once crashed the process inside rtree (a map picture drawn ahead
+# beside one drawn on read, 2026-12-03). Every ray or proximity query of a cached mesh in the
+# coordinator holds this lock (manifolds/grouping.surface_radii, exploration/symmetry.detect).
+MESH_QUERIES = threading.Lock()
 
 
 @functools.lru_cache(maxsize=16)

@@ -38,9 +38,9 @@ from graspscape.services.coordinator.store.pose_rows import (
     pg_insert,
 )
 from graspscape.services.coordinator.store.queue import (
-    _FINISH_EXPLORATIONS as FINISH_EXPLORATIONS,  # its statement, for the pipeline
+    FINISH_EXPLORATIONS,  # its statement, for the pipeline
+    finish_complete_explorations,
 )
-from graspscape.services.coordinator.store.queue import finish_complete_explorations
 from graspscape.shared.specs.pose import tile_pose_keys
 from graspscape.shared.specs.results import PoseResult
 from pydantic import BaseModel

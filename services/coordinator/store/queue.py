@@ -184,7 +184,7 @@ _ANY_FAILED = (
     .where(TileRow.exploration_id == ExplorationRow.id, TileRow.state == TileState.FAILED)
     .exists()
 )
-_FINISH_EXPLORATIONS = (
+FINISH_EXPLORATIONS = (
     update(ExplorationRow)
     .where(
         ExplorationRow.id.in_(bindparam("ids", expanding=True)),
@@ -231,7 +231,7 @@ def finish_complete_explorations(
     ids = sorted(set(exploration_ids))
     if not ids:
         return
-    session.connection().execute(_FINISH_EXPLORATIONS, {"ids": ids, "now": now})
+    session.connection().execute(FINISH_EXPLORATIONS, {"ids": ids, "now": now})
 
 
 def retry_failed_tiles(
