@@ -15,6 +15,7 @@ behavioral manifolds (a later issue), so v is the volume of the whole viable set
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 
@@ -39,6 +40,7 @@ def main() -> None:
     parser.add_argument("--no-min-effort", action="store_true")
     args = parser.parse_args()
     started = time.perf_counter()
+    load_start = os.getloadavg()[0]  # the VM is shared: the results say how busy it was
     rows = [compare_object(name, args.grid, min_effort=not args.no_min_effort,
                            log=lambda msg: print(msg, file=sys.stderr, flush=True))
             for name in args.objects]
@@ -64,6 +66,8 @@ def main() -> None:
         for key, value in handle.model_dump().items():
             figures[f"mug_handle_sweep.{key}"] = value
     figures["wall_s"] = round(time.perf_counter() - started, 1)
+    figures["load_avg_1min_start"] = round(load_start, 2)
+    figures["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
     table = markdown_table(rows)
     print(table)
     write_results("policy_comparison", figures, extra={
