@@ -90,7 +90,7 @@ def _process_ids(log: str) -> dict[int, int]:
 
 def soak(work: Path, *, tiles: int, procs: int = 3, kill_every_tiles: int | None = None,
          simulated_minutes: float = 3.0, sample_every_s: float = 1.0,
-         timeout_s: float = 3600) -> dict[str, Any]:
+         timeout_s: float = 3600, pose_s: float = 0.0) -> dict[str, Any]:
     url = f"sqlite:///{work / 'coordinator.db'}"
     db.upgrade(url)
     engine = db.make_engine(url)
@@ -107,7 +107,7 @@ def soak(work: Path, *, tiles: int, procs: int = 3, kill_every_tiles: int | None
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
     coordinator = Child(coordinator_args(url, free_port(), listen=[endpoint]),
                         work / "coordinator.log")
-    worker = Child(worker_args(endpoint, "soak", work / "cache", procs=procs),
+    worker = Child(worker_args(endpoint, "soak", work / "cache", procs=procs, pose_s=pose_s),
                    work / "worker.log")
     samples: dict[str, list[float]] = {"coordinator": [], "supervisor": [], "process_0": []}
     fds: list[int] = []
@@ -191,6 +191,7 @@ def soak(work: Path, *, tiles: int, procs: int = 3, kill_every_tiles: int | None
         "elapsed_s": round(elapsed, 1),
         "tiles_per_s": round(tiles_total / elapsed, 1),
         "procs": procs,
+        "pose_s": pose_s,
         "kill_every_tiles": kill_every_tiles,
         "kill_every_simulated_min": round(kill_every_tiles * sim_tile_s / 60, 2),
         "simulated_hours": round(tiles_total * sim_tile_s / 3600, 2),
