@@ -29,8 +29,9 @@ def _explore(sessions, spec: ExplorationSpec, evaluate, workers: int, seed: int
         eid = create_exploration(s, spec=spec, tile_target_poses=8, max_poses=10**6).id
     run_local(sessions, evaluate, workers=workers, seed=seed, split=2)
     with sessions() as s:
-        return sorted(s.execute(select(PoseRow.pose_key, PoseRow.outcome, PoseRow.viable)
-                                .where(PoseRow.exploration_id == eid)).tuples())
+        rows = s.execute(select(PoseRow.pose_key, PoseRow.outcome, PoseRow.viable)
+                         .where(PoseRow.exploration_id == eid))
+        return sorted(tuple(row) for row in rows)
 
 
 @pytest.mark.slow  # two physics explorations of 24 poses per explorer and database
