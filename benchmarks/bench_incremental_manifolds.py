@@ -19,8 +19,9 @@ since the tile before (after) and cold (the process's maps dropped: every row re
 computed and written whole, as every refresh did before; up to --store-cold-up-to poses).
 
 `--baseline REF`: before each map, the same map measured in a fresh process with the manifolds
-package as it was at git REF (`git archive`): its running-map figures as baseline_*, in
-incremental_manifolds_ab.json.
+and exploration packages (the latter holds the lattice's Point) as they were at git REF (`git
+archive`): its running-map figures as baseline_*, in incremental_manifolds_ab.json (or
+`--results NAME`).
 
 Run: python -m benchmarks.bench_incremental_manifolds [--maps 10:1,10:4,9:8] [--tiles 8] [--store]
 """
@@ -40,11 +41,14 @@ import tempfile
 import time
 from pathlib import Path
 
-MANIFOLDS_AT = "GRASPSCAPE_BENCH_MANIFOLDS"  # a baseline run: the manifolds package's folder
-if os.environ.get(MANIFOLDS_AT):  # before anything imports a module of it
-    import graspscape.services.coordinator.manifolds as _manifolds
+PACKAGES_AT = "GRASPSCAPE_BENCH_PACKAGES"  # a baseline run: the archive holding the packages
+BASELINE_PACKAGES = ("manifolds", "exploration")  # under services/coordinator
+if os.environ.get(PACKAGES_AT):  # before anything imports a module of them
+    import importlib
 
-    _manifolds.__path__[:] = [os.environ[MANIFOLDS_AT]]
+    for _name in BASELINE_PACKAGES:
+        importlib.import_module(f"graspscape.services.coordinator.{_name}").__path__[:] = [
+            os.path.join(os.environ[PACKAGES_AT], "services/coordinator", _name)]
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point  # noqa: E402
 from graspscape.services.coordinator.manifolds import snapshot  # noqa: E402
@@ -247,14 +251,16 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
 
 
 def baseline(ref: str, item: str, tiles: int) -> dict[str, float]:
-    """One map's running-map figures with the manifolds package of git `ref`, measured in a
-    process of its own."""
+    """One map's running-map figures with the manifolds and exploration packages of git `ref`,
+    measured in a process of its own."""
     repo = Path(__file__).resolve().parents[1]
     with tempfile.TemporaryDirectory() as folder:
-        archive = subprocess.run(["git", "archive", ref, "services/coordinator/manifolds"],
-                                 cwd=repo, check=True, capture_output=True).stdout
+        archive = subprocess.run(
+            ["git", "archive", ref,
+             *(f"services/coordinator/{name}" for name in BASELINE_PACKAGES)],
+            cwd=repo, check=True, capture_output=True).stdout
         subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
-        env = {**os.environ, MANIFOLDS_AT: f"{folder}/services/coordinator/manifolds"}
+        env = {**os.environ, PACKAGES_AT: folder}
         out = subprocess.run([sys.executable, "-m", "benchmarks.bench_incremental_manifolds",
                               "--maps", item, "--tiles", str(tiles), "--json"], cwd=repo,
                              env=env, check=True, capture_output=True, text=True).stdout
@@ -275,7 +281,9 @@ def main() -> None:
                         "computes and writes the whole map: minutes at 100k on a loaded VM)")
     parser.add_argument("--baseline", metavar="REF",
                         help="also each map's running-map figures with the manifolds package "
-                        "of git REF, in a fresh process before it")
+                        "and exploration packages of git REF, in a fresh process before it")
+    parser.add_argument("--results", help="results file name (default incremental_manifolds, "
+                        "with --baseline incremental_manifolds_ab)")
     parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     figures: dict[str, float] = {"tile_poses": TILE,
@@ -295,8 +303,9 @@ def main() -> None:
                       args.store_cold_up_to)
     figures["load_avg_1min_end"] = round(os.getloadavg()[0], 2)
     # An A/B run has a file of its own: the --store figures of the last full run stay.
-    write_results("incremental_manifolds_ab" if args.baseline else "incremental_manifolds",
-                  figures, {"note": (
+    name = args.results or ("incremental_manifolds_ab" if args.baseline
+                            else "incremental_manifolds")
+    write_results(name, figures, {"note": (
         "CPU seconds (process_time) on a shared 2-core machine, keys by the map's poses. "
         "full_*: the whole map at once (grouping.components, then summary.build_map: what a "
         "refresh computed before issue 21's running map, apart from grouping, which was "
@@ -306,7 +315,8 @@ def main() -> None:
         "process's CPU, SQLite included, and wall time) after one more tile of a grid "
         "exploration, with the running map kept (running) and dropped (cold: every row "
         "read, everything computed and written). baseline_*: the same map measured in a "
-        "fresh process with the manifolds package of --baseline, just before.")})
+        "fresh process with the manifolds and exploration packages of --baseline, just "
+        "before.")})
 
 
 if __name__ == "__main__":

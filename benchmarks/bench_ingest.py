@@ -15,11 +15,12 @@ each thread an exploration of its own, the same work without that lock, to compa
 `--baseline REF` adds an interleaved A/B of that K-thread run on PostgreSQL: store/ingest.py
 as it was at git REF against today's, `--rounds` times each (medians in the results).
 
-`--refresh` (ingest_refresh.json) times the single thread with the manifold table's refresh
-after each batch, and the manifold upkeep's own CPU per pose (`maybe_refresh`; this
-process's CPU: SQLite's work included, PostgreSQL's server not). With `--baseline REF` it
-runs that `--rounds` times per backend, interleaved, each run in a fresh process: the
-manifolds package as it was at git REF (`git archive`) against today's.
+`--refresh` (ingest_refresh.json, or `--results NAME`) times the single thread with the
+manifold table's refresh after each batch, and the manifold upkeep's own CPU per pose
+(`maybe_refresh`; this process's CPU: SQLite's work included, PostgreSQL's server not). With
+`--baseline REF` it runs that `--rounds` times per backend, interleaved, each run in a fresh
+process: the manifolds and exploration packages (the latter holds the lattice's Point) as
+they were at git REF (`git archive`) against today's.
 """
 
 from __future__ import annotations
@@ -44,11 +45,14 @@ import psycopg
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
-MANIFOLDS_AT = "GRASPSCAPE_BENCH_MANIFOLDS"  # a baseline run: the manifolds package's folder
-if os.environ.get(MANIFOLDS_AT):  # before anything imports a module of it
-    import graspscape.services.coordinator.manifolds as _manifolds
+PACKAGES_AT = "GRASPSCAPE_BENCH_PACKAGES"  # a baseline run: the archive holding the packages
+BASELINE_PACKAGES = ("manifolds", "exploration")  # under services/coordinator
+if os.environ.get(PACKAGES_AT):  # before anything imports a module of them
+    import importlib
 
-    _manifolds.__path__[:] = [os.environ[MANIFOLDS_AT]]
+    for _name in BASELINE_PACKAGES:
+        importlib.import_module(f"graspscape.services.coordinator.{_name}").__path__[:] = [
+            os.path.join(os.environ[PACKAGES_AT], "services/coordinator", _name)]
 
 import graspscape.services.coordinator.exploration.scheduler as scheduler_module  # noqa: E402
 from graspscape.services.coordinator import db  # noqa: E402
@@ -270,6 +274,8 @@ def main() -> int:
                         help="single-thread ingest with the manifold table's refresh after "
                              "each batch, as the adaptive strategy does (results file "
                              "ingest_refresh.json)")
+    parser.add_argument("--results", help="results file name (default ingest, with --refresh "
+                        "ingest_refresh)")
     args = parser.parse_args()
     backends = args.backends.split(",")
 
@@ -301,7 +307,7 @@ def main() -> int:
                                  threads=args.threads, seconds=args.seconds, batch=args.batch))
     figures["load_average_1min_end"] = round(os.getloadavg()[0], 1)
     if not args.no_write:
-        write_results("ingest", figures)
+        write_results(args.results or "ingest", figures)
     return 0
 
 
@@ -325,30 +331,31 @@ def run_refresh(args: argparse.Namespace, backends: list[str],
             figures.update(refresh_ab(args, backend))
     figures["load_average_1min_end"] = round(os.getloadavg()[0], 1)
     if not args.no_write:
-        write_results("ingest_refresh", figures, {"note": (
+        write_results(args.results or "ingest_refresh", figures, {"note": (
             "Shared 2-core VM (other work running: see the load averages). "
             "manifold_upkeep_cpu_ms_per_pose: maybe_refresh's CPU in this process per pose "
             "stored (SQLite's work included; PostgreSQL's server not). ab_*: --rounds "
             "interleaved runs per backend, each in a fresh process, with the manifolds "
-            "package of --baseline (git archive) and today's; medians.")})
+            "and exploration packages of --baseline (git archive) and today's; medians.")})
     return 0
 
 
 def refresh_ab(args: argparse.Namespace, backend: str) -> dict[str, float]:
-    """Interleaved refresh runs of `backend`: the manifolds package at args.baseline, then
-    today's, `args.rounds` times; the medians of poses/s and upkeep CPU per pose."""
+    """Interleaved refresh runs of `backend`: the manifolds and exploration packages at
+    args.baseline, then today's, `args.rounds` times; the medians of poses/s and upkeep CPU
+    per pose."""
     got: dict[str, list[dict[str, float]]] = {"baseline": [], "current": []}
     with tempfile.TemporaryDirectory() as folder:
         archive = subprocess.run(
-            ["git", "archive", args.baseline, "services/coordinator/manifolds"],
+            ["git", "archive", args.baseline,
+             *(f"services/coordinator/{name}" for name in BASELINE_PACKAGES)],
             cwd=REPO, check=True, capture_output=True).stdout
         subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
-        old = str(Path(folder) / "services/coordinator/manifolds")
         for _ in range(args.rounds):
             for name in ("baseline", "current"):
-                env = {k: v for k, v in os.environ.items() if k != MANIFOLDS_AT}
+                env = {k: v for k, v in os.environ.items() if k != PACKAGES_AT}
                 if name == "baseline":
-                    env[MANIFOLDS_AT] = old
+                    env[PACKAGES_AT] = folder
                 out = subprocess.run(
                     [sys.executable, __file__, "--refresh-run", backend, "--seconds",
                      str(args.seconds), "--batch", str(args.batch), "--pg-url", args.pg_url],

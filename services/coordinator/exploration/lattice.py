@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 from graspscape.shared.specs.exploration import PoseGridSpec
 from graspscape.shared.specs.pose import Pose
@@ -32,9 +33,14 @@ from graspscape.shared.specs.pose import Pose
 TWO_PI = 2 * math.pi
 
 
-@dataclass(frozen=True, order=True)
-class Point:
-    """A lattice point by its integer indices at the finest level (K, J, I, a above)."""
+class Point(NamedTuple):
+    """A lattice point by its integer indices at the finest level (K, J, I, a above).
+
+    A NamedTuple rather than a frozen dataclass: hashing, equality and ordering run in C
+    (the running map makes, hashes and compares millions of these; about a fifth of its
+    upkeep was the dataclass's Python-level __hash__/__eq__/__lt__). Same fields in the same
+    order, so the same hash, sort order and repr as the dataclass had. Unlike it, a Point
+    equals the plain tuple of its fields and is iterable; nothing stores one as JSON."""
 
     ring: int  # K: ring index at the finest level
     azimuth: int  # J: azimuth index on that ring at the finest level

@@ -254,18 +254,30 @@ class Owners:
         for p in new:
             by_att.setdefault(p.attitude, []).append(p)
         moves = [(np.zeros(0, dtype=np.int64),) * 3]
+        # A tile is cells × r levels × attitudes, so a batch's poses of every attitude are
+        # usually at the same positions: the search (which sees positions only, and indexes
+        # the sorted known poses, which are then in the same order) is made once per distinct
+        # positions and candidates, not once per attitude. The same arrays either way.
+        searched: dict[tuple[bytes, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        nearby: dict[bytes, np.ndarray] = {}
         for a, known in by_att.items():
             known.sort()
             own_pos = np.array([grid.position(p) for p in known])
             keys = own_pos * n_a + a
             self.point.update(zip(keys.tolist(), known, strict=True))
-            own_emb = grid.embedding[own_pos]
-            near = self.tree.query_ball_point(own_emb, self.rho * (1 + 1e-9))
+            at = own_pos.tobytes()
+            near = nearby.get(at)
+            if near is None:
+                near = nearby[at] = np.concatenate([
+                    np.asarray(x, dtype=np.int64) for x in self.tree.query_ball_point(
+                        grid.embedding[own_pos], self.rho * (1 + 1e-9))])
             # and every far one: while a sweep covers the lattice, the batch is nearer to
             # most of them than their owner (a first pass to sort them out costs more).
-            cand = np.unique(np.concatenate([np.concatenate([np.asarray(x, dtype=np.int64)
-                                                             for x in near]), self.far[a]]))
-            idx, d2 = nearest_known(grid, known, cand)
+            cand = np.unique(np.concatenate([near, self.far[a]]))
+            found = searched.get((at, cand.tobytes()))
+            if found is None:
+                found = searched[(at, cand.tobytes())] = nearest_known(grid, known, cand)
+            idx, d2 = found
             f = cand * n_a + a
             cur, old, q = self.d2[f], self.owner[f], keys[idx]
             # Nearer, or as near and the smaller point (nearest_known's ties).

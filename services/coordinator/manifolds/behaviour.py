@@ -153,10 +153,24 @@ def same_behaviour(a: StoredPose, b: StoredPose, tolerance: float | None = None)
 def joint_difference(a: StoredPose, b: StoredPose, joints: set[str]) -> float:
     """The largest per-digit mean |Δ joint angle|: one finger closing differently counts in
     full instead of being averaged away by the fingers that did not change."""
-    per_digit: dict[str, list[float]] = {}
-    for j in joints:
-        per_digit.setdefault(j.split("_")[0], []).append(abs(a.joints[j] - b.joints[j]))
-    return max(sum(v) / len(v) for v in per_digit.values())
+    # The hottest comparison of the running map's upkeep. The joints grouped by digit once
+    # per joint set as iterated (`_PLANS`: digits in first-seen order, each digit's joints in
+    # the set's order), not split and grouped on every call: the same terms summed in the
+    # same order, the digits' means compared in the same order, so the same float.
+    key = tuple(joints)
+    plan = _PLANS.get(key)
+    if plan is None:
+        groups: dict[str, list[str]] = {}
+        for j in key:
+            groups.setdefault(j.split("_")[0], []).append(j)
+        if len(_PLANS) >= 4096:  # a handful of grippers' joint sets: a bound, never reached
+            _PLANS.clear()
+        plan = _PLANS[key] = tuple(tuple(names) for names in groups.values())
+    ja, jb = a.joints, b.joints
+    return max(sum([abs(ja[j] - jb[j]) for j in names]) / len(names) for names in plan)
+
+
+_PLANS: dict[tuple[str, ...], tuple[tuple[str, ...], ...]] = {}
 
 
 def slid(a: StoredPose, b: StoredPose) -> bool:

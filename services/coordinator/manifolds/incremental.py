@@ -71,6 +71,7 @@ class IncrementalGrouping:
                                  self.first)
         self.neighbours = self._votes.neighbours  # `grouping.speck_neighbours`, cached
         self._moved: list[Point] = []  # points that changed component in this batch
+        self._attitude_cache: dict[int, tuple[int, ...]] = {}  # `_attitudes`
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -96,21 +97,25 @@ class IncrementalGrouping:
         # q → p from the points stored before this batch. The neighbour relation is
         # symmetric level by level (q is p's level-L neighbour iff p is q's: the tests check
         # it), so p's own neighbour lists find both.
-        lat, samples = self.lattice, self.samples
+        lat, samples, link, make = self.lattice, self.samples, self._link, tuple.__new__
+        at = self.neighbours.at  # lat.neighbours(p, level)'s points, cached per direction cell
         for p in sorted(new):
             if not new[p].viable:
                 continue
             for level in range(lat.birth(p), lat.depth + 1):
-                for _, q in lat.neighbours(p, level):
+                finest = level >= lat.depth  # lat.midpoint is None there: not asked
+                for q in at(p, level):
                     b = samples.get(q)
                     if b is None or not b.viable:
                         continue
-                    self._link(p, q, lat.midpoint(p, q, level))
+                    link(p, q, None if finest else lat.midpoint(p, q, level))
                     if q not in new:
-                        self._link(q, p, lat.midpoint(q, p, level))
-            for q in lat.attitude_neighbours(p):  # never cut: one link is enough
+                        link(q, p, None if finest else lat.midpoint(q, p, level))
+            K, J, i, _ = p
+            for a in self._attitudes(p):  # never cut: one link is enough
+                q = make(Point, (K, J, i, a))
                 if q in samples:
-                    self._link(p, q, None)
+                    link(p, q, None)
         # Then the links the new points cut (all of them made before this batch), one at a
         # time: a connected component less one link is at most two parts, so the search
         # from the link's ends finds the whole part that left. (Cutting them all first and
@@ -128,15 +133,25 @@ class IncrementalGrouping:
         fresh.add(samples.items())
         self.__dict__.update(fresh.__dict__)
 
+    def _attitudes(self, p: Point) -> tuple[int, ...]:
+        """The attitudes of `lattice.attitude_neighbours(p)`, in its order (they depend on
+        p's attitude only: kept per attitude)."""
+        got = self._attitude_cache.get(p.attitude)
+        if got is None:
+            got = tuple(q.attitude for q in self.lattice.attitude_neighbours(p))
+            self._attitude_cache[p.attitude] = got
+        return got
+
     def _link(self, p: Point, q: Point, mid: Point | None) -> None:
         """Link p → q as `grouping.components` does: both viable, the same behaviour, and
         the midpoint between them (if any) not stored."""
-        if mid is not None and mid in self.samples:
+        samples = self.samples
+        if mid is not None and mid in samples:
             return
-        a, b = self.samples[p], self.samples[q]
+        a, b = samples[p], samples[q]
         if not (a.viable and b.viable and same_behaviour(a, b)):
             return
-        pair = _pair(p, q)
+        pair = (p, q) if p < q else (q, p)  # _pair(p, q)
         n = self._count.get(pair, 0)
         self._count[pair] = n + 1
         if mid is not None:

@@ -108,25 +108,28 @@ class Neighbourhoods:
             raise ValueError("coarser must be ≥ 0")
         self.lattice = lattice
         self.hops = 1 << coarser
-        self._pos: dict[tuple[int, int, int], list[tuple[Point, int]]] = {}
-        self._att: dict[int, list[tuple[int, int]]] = {}
+        self._pos: dict[tuple[int, int, int], list[tuple[int, int, int, int]]] = {}
+        self._att: dict[int, list[tuple[int, ...]]] = {}
 
     def __call__(self, p: Point) -> list[Point]:
-        key = (p.ring, p.azimuth, p.r_index)
-        pos = self._pos.get(key)
+        # Every position x of the ball (sorted, with its distance dx) with every attitude a of
+        # the attitude ball (sorted) where dx + da ≤ hops, p itself left out. Per attitude,
+        # the attitudes allowed at each dx are listed once (`_att`, in sorted order), so this
+        # is one flat comprehension making the same points in the same order.
+        ring, azimuth, r_index, attitude = p
+        pos = self._pos.get((ring, azimuth, r_index))
         if pos is None:
-            pos = sorted(_position_ball(self.lattice, p, self.hops).items())
-            self._pos[key] = pos
-        att = self._att.get(p.attitude)
+            pos = [(*x[:3], dx)
+                   for x, dx in sorted(_position_ball(self.lattice, p, self.hops).items())]
+            self._pos[(ring, azimuth, r_index)] = pos
+        att = self._att.get(attitude)
         if att is None:
-            att = sorted(_attitude_ball(self.lattice, p.attitude, self.hops).items())
-            self._att[p.attitude] = att
-        out = []
-        for x, dx in pos:
-            for a, da in att:
-                if dx + da <= self.hops and (dx or da):
-                    out.append(Point(x.ring, x.azimuth, x.r_index, a))
-        return out
+            ball = sorted(_attitude_ball(self.lattice, attitude, self.hops).items())
+            att = [tuple(a for a, da in ball if dx + da <= self.hops and (dx or da))
+                   for dx in range(self.hops + 1)]
+            self._att[attitude] = att
+        new = tuple.__new__
+        return [new(Point, (K, J, i, a)) for K, J, i, dx in pos for a in att[dx]]
 
 
 def neighbourhood(lattice: Lattice, p: Point, *, coarser: int = 0) -> list[Point]:

@@ -38,7 +38,8 @@ from graspscape.services.coordinator.manifolds.live import MapState
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
 ENV = "GRASPSCAPE_MANIFOLD_SNAPSHOTS"
-FORMAT = 1  # with the code's digest (`code_version`): files of other code are ignored
+FORMAT = 2  # with the code's digest (`code_version`): files of other code are ignored
+# (2: lattice.Point a NamedTuple, was a dataclass: a format-1 file must be rebuilt)
 SAVE_GROWTH = 1.2  # save when the rows read have grown by this factor since the last save
 MIN_ROWS = 5_000  # smaller maps rebuild in a few seconds: not worth a file
 

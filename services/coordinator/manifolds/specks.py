@@ -54,12 +54,17 @@ class Neighbours:
 
     def __call__(self, p: Point) -> list[Point]:
         lat = self.lattice
-        K, J, i, a = p.ring, p.azimuth, p.r_index, p.attitude
-        out: list[Point] = []
-        for level in range(lat.birth(p), lat.depth + 1):
-            s = lat.scale(level)
-            out += [Point(K, J, r, a) for r in (i - s, i + s) if 0 <= r <= self._top]
-            out += [Point(k, j, i, a) for k, j in self._cell(K, J, level)]
+        if lat.depth == 0:
+            return self.at(p, 0)
+        return [q for level in range(lat.birth(p), lat.depth + 1) for q in self.at(p, level)]
+
+    def at(self, p: Point, level: int) -> list[Point]:
+        """The points of `lattice.neighbours(p, level)`, in its order: normal, ring, cross."""
+        top, new = self._top, tuple.__new__  # new: a Point without NamedTuple's __new__
+        K, J, i, a = p
+        s = 1 << (self.lattice.depth - level)  # lattice.scale(level)
+        out = [new(Point, (K, J, r, a)) for r in (i - s, i + s) if 0 <= r <= top]
+        out += [new(Point, (k, j, i, a)) for k, j in self._cell(K, J, level)]
         return out
 
 
@@ -98,7 +103,18 @@ class SpeckVotes:
             old = rec.get(x)
             if old is not None and old != comp_of[x]:
                 self._rehome(x, old, comp_of[x])
-        neighbours, near = self.neighbours, self._near
+        near = self._near
+        # A point's neighbours are a pure function of it; within one batch the same points
+        # are asked for again and again (x's neighbours q, then q's to count the links back),
+        # so they are kept for the batch.
+        hoods: dict[Point, list[Point]] = {}
+
+        def neighbours(q: Point) -> list[Point]:
+            got = hoods.get(q)
+            if got is None:
+                got = hoods[q] = self.neighbours(q)
+            return got
+
         for x in new:
             cx = rec[x] = comp_of[x]
             mine = neighbours(x)
