@@ -13,7 +13,8 @@ running map's too), timed apart as `draw_ahead`, as the coordinator does it off 
 Each code is served by a fresh `uvicorn` process (bench_query.serve) with that code first on
 the path. Per (size, state, code, round): a server asked for the default picture, then
 `cut=vertical`, then `cut=vertical&phi0_deg=60` in turn (`seq`: what one viewer paging through
-the cuts of one map version gets), and two more servers asked each for one of the two others
+the cuts of one map version gets; `--think-s` seconds after the default one: a viewer looking
+at it first), and two more servers asked each for one of the two others
 alone (`alone`: the cold first read); each server is asked `--settle-s` after it first answers
 (a coordinator that has started, not one still importing; the code after the change draws a
 small made-up map then, in a background thread). Figures: wall ms of the request and the
@@ -22,7 +23,8 @@ medians over rounds are written, with the rounds' values. Pixels: the decoded PN
 codes are compared (`pixels_differing_*`). Writes benchmarks/results/map_picture.json.
 
     .venv/bin/python benchmarks/bench_map_picture.py --before-code DIR [--after-code DIR]
-        [--sizes 10k,100k] [--pg-sizes 100k] [--keep DIR] [--pg-db NAME] [--rounds 2]
+        [--sizes 10k,100k,1m] [--pg-sizes 100k] [--keep DIR] [--pg-db NAME] [--rounds 2]
+        [--think-s 0] [--results NAME]
 """
 
 from __future__ import annotations
@@ -126,6 +128,7 @@ def _get(server: Served, path: str) -> tuple[float, float, bytes]:
 
 
 SETTLE_S = 4.0  # --settle-s
+THINK_S = 0.0  # --think-s
 
 
 def _one_code(url: str, code: Path, state: str, out: dict[str, list[float]],
@@ -136,11 +139,17 @@ def _one_code(url: str, code: Path, state: str, out: dict[str, list[float]],
         out.setdefault(f"draw_ahead_ms_{prefix}", []).append(ahead)
     with Served(url, code) as server:
         time.sleep(SETTLE_S)
-        for name, path in PICTURES.items():
+        cpu0 = server.cpu_s()
+        for k, (name, path) in enumerate(PICTURES.items()):
+            if k == 1:
+                time.sleep(THINK_S)  # a viewer looking at the default picture first
             wall, cpu, png = _get(server, path)
             out.setdefault(f"{name}_seq_ms_{prefix}", []).append(wall)
             out.setdefault(f"{name}_seq_server_cpu_ms_{prefix}", []).append(cpu)
             pngs[name] = png
+        # The server's CPU over the three, the think time's included (work done ahead).
+        out.setdefault(f"seq_total_server_cpu_ms_{prefix}", []).append(
+            (server.cpu_s() - cpu0) * 1000)
     for name in ("vertical", "phi60"):
         with Served(url, code) as server:
             time.sleep(SETTLE_S)
@@ -156,7 +165,7 @@ def _pixels(png: bytes) -> np.ndarray:
 
 
 def main() -> int:
-    global SETTLE_S
+    global SETTLE_S, THINK_S
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before-code", type=Path, required=True,
                         help="the code before the change (`git archive REV` unpacked)")
@@ -171,10 +180,14 @@ def main() -> int:
     parser.add_argument("--settle-s", type=float, default=SETTLE_S,
                         help="wait this long after a server answers before asking for a "
                         "picture (a started coordinator, not one still starting)")
+    parser.add_argument("--think-s", type=float, default=THINK_S,
+                        help="in seq, wait this long after the default picture before asking "
+                        "for the next (a viewer shown the default picture first; default 0)")
     args = parser.parse_args()
-    SETTLE_S = args.settle_s
+    SETTLE_S, THINK_S = args.settle_s, args.think_s
     bench_query.PG_DB = args.pg_db
-    figures: dict[str, float] = {"load_avg_1min_start": bench_query._load()}
+    figures: dict[str, float] = {"load_avg_1min_start": bench_query._load(),
+                                 "think_s": THINK_S}
     rounds: dict[str, list[float]] = {}
     targets = [(size, f"sqlite:///{args.keep / f'query_{size}.db'}", f"{size}_sqlite")
                for size in filter(None, args.sizes.split(","))]
@@ -213,8 +226,9 @@ def main() -> int:
         "rounds": {name: [round(v, 1) for v in values] for name, values in rounds.items()},
         "before_code": str(args.before_code), "after_code": str(args.after_code),
         "note": ("first reads of map.png in fresh uvicorn servers (bench_query.serve), "
-                 "NAME_seq: default, then cut=vertical, then cut=vertical&phi0_deg=60 in one "
-                 "server; NAME_alone: that picture alone in a fresh server; server_cpu: the "
+                 "NAME_seq: default, then (think_s later) cut=vertical, then "
+                 "cut=vertical&phi0_deg=60 in one server; NAME_alone: that picture alone in "
+                 "a fresh server; server_cpu: the "
                  "server process's user+system CPU for the request; draw_ahead: the code's "
                  "own draw-ahead (off the read path) where it has one; median over rounds, "
                  "rounds alternate which code goes first; a shared 2-core machine (other "

@@ -10,20 +10,24 @@ row read while the version matches.
 
 What a picture is drawn from — the poses' arrays and the manifold table, ~0.2 s of reading at
 100k poses and seconds at 1M — is kept for the last INPUT_VERSIONS map versions, so another
-cut, φ0, r or attitude of the same version reads nothing again; and one drawing per picture
-at a time: a request for a picture being drawn waits for it instead of drawing it too (the
-8 clients of one page ask for the same picture at once), and the default picture waits for
-its draw-ahead in flight.
+cut, φ0, r or attitude of the same version reads nothing again (nor derives its directions,
+trees and 3D markers again: maps/derived.py); and one drawing per picture at a time: a request
+for a picture being drawn waits for it instead of drawing it too (the 8 clients of one page ask
+for the same picture at once), and the default picture waits for its draw-ahead in flight.
+When a stored default picture is served and its version's inputs are not kept (a restart,
+another process), they are read ahead in a background thread (`read_ahead`): a viewer sees
+the default picture first, and at 1M poses the read is most of a first cut's cost.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import math
 import threading
 from collections import OrderedDict
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.lattice import Lattice
@@ -39,6 +43,9 @@ _cache: OrderedDict[tuple[object, ...], tuple[bytes, int, int]] = OrderedDict()
 _inputs: OrderedDict[tuple[object, ...], tuple[MapPoints, list[ManifoldSummary]]] = OrderedDict()
 _lock = threading.Lock()  # the two caches and _drawing, across the server's threads
 _drawing: dict[tuple[object, ...], threading.Lock] = {}
+_reading: dict[tuple[object, ...], threading.Lock] = {}  # versions whose inputs are being read
+_ahead: dict[tuple[object, ...], threading.Thread] = {}  # read_ahead threads in flight
+log = logging.getLogger("graspscape.coordinator.maps")
 
 
 def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "svg"], *,
@@ -101,6 +108,9 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
             if (fmt, cut, phi0_deg, attitude, title, r_level) == (
                     "png", "horizontal", 0.0, 0, default_title(exploration_id), None) and (
                     stored := stored_default(session, row)) is not None:
+                # A viewer shown the default picture asks for other cuts next: their reading
+                # starts now, in the background, not at the next request.
+                read_ahead(session.get_bind(), version, exploration_id, lattice, row.object_id)
                 return _keep(key, stored)
             points, manifolds = _drawn_from(session, version, exploration_id, lattice)
             data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),
@@ -133,7 +143,8 @@ def _keep(key: tuple[object, ...], value: tuple[bytes, int, int]) -> tuple[bytes
 
 def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: int,
                 lattice: Lattice) -> tuple[MapPoints, list[ManifoldSummary]]:
-    """The poses' arrays and the manifold table at `version`, read once per version."""
+    """The poses' arrays and the manifold table at `version`, read once per version: a
+    request for a version being read (by a read-ahead) waits for that read."""
     from graspscape.services.coordinator.manifolds.service import stored_manifolds
     from graspscape.services.coordinator.maps.points import stored_points
 
@@ -142,13 +153,67 @@ def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: i
         if found is not None:
             _inputs.move_to_end(version)
             return found
-    found = (stored_points(session, exploration_id, lattice),
-             stored_manifolds(session, exploration_id))
-    with _lock:
-        _inputs[version] = found
-        while len(_inputs) > INPUT_VERSIONS:
-            _inputs.popitem(last=False)
+        reading = _reading.setdefault(version, threading.Lock())
+    with reading:
+        with _lock:
+            found = _inputs.get(version)
+        if found is not None:
+            return found
+        try:
+            found = (stored_points(session, exploration_id, lattice),
+                     stored_manifolds(session, exploration_id))
+            with _lock:
+                _inputs[version] = found
+                while len(_inputs) > INPUT_VERSIONS:
+                    _inputs.popitem(last=False)
+        finally:
+            with _lock:
+                _reading.pop(version, None)
     return found
+
+
+def read_ahead(bind: Any, version: tuple[object, ...], exploration_id: int, lattice: Lattice,
+               object_id: int) -> threading.Thread | None:
+    """Read a version's inputs and derive what every cut needs (maps/derived.py: directions,
+    attitude 0's tree, the 3D view's markers) in a background thread, unless kept or being
+    read: at 1M poses that is ~3 s of the first cut's ~4 s, paid while the viewer looks at
+    the default picture. Not a daemon (a stop waits for it, as for the draw-aheads)."""
+    with _lock:
+        if version in _inputs or version in _reading or version in _ahead:
+            return None
+        thread = threading.Thread(target=_read_ahead, name=f"map-read-{exploration_id}",
+                                  args=(bind, version, exploration_id, lattice, object_id))
+        _ahead[version] = thread
+    thread.start()
+    return thread
+
+
+def _read_ahead(bind: Any, version: tuple[object, ...], exploration_id: int, lattice: Lattice,
+                object_id: int) -> None:
+    from graspscape.services.coordinator.maps import derived
+    from graspscape.services.coordinator.maps.render import _COLOURS
+    from graspscape.services.coordinator.objects.geometry import object_mesh
+
+    try:
+        with Session(bind) as session:
+            points, _ = _drawn_from(session, version, exploration_id, lattice)
+            mesh = object_mesh(session, object_id)
+        derived.known(points, lattice, 0)
+        derived.markers(lattice, points, mesh, _COLOURS)
+    except Exception:  # the next cut reads on demand instead
+        log.warning("exploration %s: the map's poses were not read ahead", exploration_id,
+                    exc_info=True)
+    finally:
+        with _lock:
+            _ahead.pop(version, None)
+
+
+def wait_read_ahead(timeout: float = 120.0) -> None:
+    """Wait for the reads ahead in flight (tests, benchmarks)."""
+    with _lock:
+        threads = list(_ahead.values())
+    for thread in threads:
+        thread.join(timeout)
 
 
 def r_level_of(lattice: Lattice, r_mm: float) -> float:

@@ -39,29 +39,25 @@ from graspscape.services.coordinator.manifolds.grouping import (
     surface_radii,
 )
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.maps import derived
 from graspscape.services.coordinator.maps.panel import reuse_panel
 from graspscape.services.coordinator.maps.points import ROBUST_CODES, MapPoints
 from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
-from scipy.spatial import cKDTree
 
 Cut = Literal["horizontal", "vertical"]
 PIXELS = 260
 NEAREST = 6
 LEGEND_ENTRIES = 8
-SCATTER_MAX = 25_000  # markers in the 3D view (`_scattered`)
 _COLOURS = plt.get_cmap("tab10").colors
+SCATTER_MAX = derived.SCATTER_MAX  # markers in the 3D view (`_scattered`)
+_scattered = derived.scattered
 
 
 def _plane_basis(cut: Cut, phi0: float) -> tuple[np.ndarray, np.ndarray]:
     if cut == "horizontal":
         return np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
     return np.array([math.cos(phi0), math.sin(phi0), 0.0]), np.array([0.0, 0.0, 1.0])
-
-
-def _embed(dirs: np.ndarray, r: np.ndarray, lattice: Lattice) -> np.ndarray:
-    scale = lattice.dtheta(0) / lattice.grid.dr if lattice.grid.dr > 0 else 0.0
-    return np.column_stack([dirs, (r - lattice.grid.r_min) * scale])
 
 
 def cut_field(
@@ -97,11 +93,10 @@ def cut_field(
     labels = np.full(X.shape, np.nan)
     mu = np.full(X.shape, np.nan)
     robust = np.full(X.shape, -1, dtype=np.int64)
-    known = points.take(points.attitude == attitude)
-    if len(known) and inside.any():
-        tree = cKDTree(_embed(known.directions(lattice), known.r, lattice))
+    known, tree = derived.known(points, lattice, attitude)
+    if tree is not None and inside.any():
         idx = np.flatnonzero(inside.ravel())
-        q = _embed(dirs[idx], r.ravel()[idx], lattice)
+        q = derived.embed(dirs[idx], r.ravel()[idx], lattice)
         k = min(NEAREST, len(known))
         dist, nn = tree.query(q, k=k)
         dist, nn = dist.reshape(len(idx), k), nn.reshape(len(idx), k)
@@ -232,29 +227,9 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
     ax.set_xlabel("m")
 
 
-def _scattered(pts: MapPoints) -> MapPoints:
-    """The viable points the 3D view draws: all of them up to SCATTER_MAX; beyond, each
-    position once per label (attitudes share positions), then an even subset (every k-th in
-    point order) — a million markers in a 600-pixel panel only overdraw one another and cost
-    seconds each."""
-    if len(pts) <= SCATTER_MAX:
-        return pts
-    code = np.stack([pts.ring, pts.azimuth, pts.r_index, pts.label], axis=1)
-    _, first = np.unique(code, axis=0, return_index=True)
-    pts = pts.take(np.sort(first))
-    step = -(-len(pts) // SCATTER_MAX)
-    return pts.take(slice(None, None, step)) if step > 1 else pts
-
-
 def _draw_3d(ax: Any, lattice: Lattice, points: MapPoints, mesh: Any | None) -> None:
-    pts = _scattered(points.take(points.viable))
-    if len(pts):
-        dirs = pts.directions(lattice)
-        # One ray per direction, not per pose: many r levels and attitudes share one.
-        unique, inverse = np.unique(dirs, axis=0, return_inverse=True)
-        rho = surface_radii(mesh, unique, FALLBACK_RADIUS)[inverse.ravel()]
-        pos = dirs * (rho + pts.r)[:, None]
-        colours = [_COLOURS[i % 10] for i in np.where(pts.label >= 0, pts.label, 0).tolist()]
+    pos, colours = derived.markers(lattice, points, mesh, _COLOURS)
+    if len(pos):
         ax.scatter(pos[:, 0], pos[:, 1], pos[:, 2], c=colours, s=6, depthshade=False,
                    rasterized=True)
     if mesh is not None and len(mesh.faces) <= 20000:
