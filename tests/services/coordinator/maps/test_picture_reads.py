@@ -157,6 +157,7 @@ def test_a_running_maps_default_picture_is_drawn_ahead_and_served_only_at_its_ve
     with sessions() as s:
         assert picture.picture_bytes(s, eid, "png", title=title) == (png, kept.manifolds, poses)
         assert not drawn
+        picture.wait_read_ahead()  # the other cuts' inputs, read in the background: done
         _ingest(s, 1)  # the version moves: the drawn-ahead picture is not this map's any more
         row = s.get(ExplorationRow, eid)
         s.refresh(row)
