@@ -41,24 +41,21 @@ import tempfile
 import time
 from pathlib import Path
 
-PACKAGES_AT = "GRASPSCAPE_BENCH_PACKAGES"  # a baseline run: the archive holding the packages
-BASELINE_PACKAGES = ("manifolds", "exploration")  # under services/coordinator
-if os.environ.get(PACKAGES_AT):  # before anything imports a module of them
-    import importlib
+# before anything imports a module of the packages a baseline run swaps
+try:
+    from benchmarks._baseline import PACKAGES_AT, extract_packages
+except ModuleNotFoundError:  # run as a script: benchmarks/ itself is on sys.path
+    from _baseline import PACKAGES_AT, extract_packages  # type: ignore[no-redef]
 
-    for _name in BASELINE_PACKAGES:
-        importlib.import_module(f"graspscape.services.coordinator.{_name}").__path__[:] = [
-            os.path.join(os.environ[PACKAGES_AT], "services/coordinator", _name)]
-
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point  # noqa: E402
-from graspscape.services.coordinator.manifolds import snapshot  # noqa: E402
-from graspscape.services.coordinator.manifolds.behaviour import StoredPose  # noqa: E402
-from graspscape.services.coordinator.manifolds.grouping import components  # noqa: E402
-from graspscape.services.coordinator.manifolds.live import MapState  # noqa: E402
-from graspscape.services.coordinator.manifolds.running import RunningMap  # noqa: E402
-from graspscape.services.coordinator.manifolds.service import radius_function  # noqa: E402
-from graspscape.services.coordinator.manifolds.summary import build_map  # noqa: E402
-from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec  # noqa: E402
+from graspscape.services.coordinator.exploration.lattice import Lattice, Point
+from graspscape.services.coordinator.manifolds import snapshot
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.grouping import components
+from graspscape.services.coordinator.manifolds.live import MapState
+from graspscape.services.coordinator.manifolds.running import RunningMap
+from graspscape.services.coordinator.manifolds.service import radius_function
+from graspscape.services.coordinator.manifolds.summary import build_map
+from graspscape.shared.specs.exploration import AttitudeSpec, PoseGridSpec
 
 try:
     from benchmarks._results import write_results
@@ -255,11 +252,7 @@ def baseline(ref: str, item: str, tiles: int) -> dict[str, float]:
     measured in a process of its own."""
     repo = Path(__file__).resolve().parents[1]
     with tempfile.TemporaryDirectory() as folder:
-        archive = subprocess.run(
-            ["git", "archive", ref,
-             *(f"services/coordinator/{name}" for name in BASELINE_PACKAGES)],
-            cwd=repo, check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
+        extract_packages(ref, folder)
         env = {**os.environ, PACKAGES_AT: folder}
         out = subprocess.run([sys.executable, "-m", "benchmarks.bench_incremental_manifolds",
                               "--maps", item, "--tiles", str(tiles), "--json"], cwd=repo,

@@ -45,15 +45,10 @@ import psycopg
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
-PACKAGES_AT = "GRASPSCAPE_BENCH_PACKAGES"  # a baseline run: the archive holding the packages
-BASELINE_PACKAGES = ("manifolds", "exploration")  # under services/coordinator
-if os.environ.get(PACKAGES_AT):  # before anything imports a module of them
-    import importlib
+# before anything imports a module of the packages a baseline run swaps
+from benchmarks._baseline import PACKAGES_AT, extract_packages  # noqa: E402
 
-    for _name in BASELINE_PACKAGES:
-        importlib.import_module(f"graspscape.services.coordinator.{_name}").__path__[:] = [
-            os.path.join(os.environ[PACKAGES_AT], "services/coordinator", _name)]
-
+# isort: split
 import graspscape.services.coordinator.exploration.scheduler as scheduler_module  # noqa: E402
 from graspscape.services.coordinator import db  # noqa: E402
 from graspscape.services.coordinator.exploration.samples import lattice_of  # noqa: E402
@@ -346,11 +341,7 @@ def refresh_ab(args: argparse.Namespace, backend: str) -> dict[str, float]:
     per pose."""
     got: dict[str, list[dict[str, float]]] = {"baseline": [], "current": []}
     with tempfile.TemporaryDirectory() as folder:
-        archive = subprocess.run(
-            ["git", "archive", args.baseline,
-             *(f"services/coordinator/{name}" for name in BASELINE_PACKAGES)],
-            cwd=REPO, check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
+        extract_packages(args.baseline, folder)
         for _ in range(args.rounds):
             for name in ("baseline", "current"):
                 env = {k: v for k, v in os.environ.items() if k != PACKAGES_AT}
