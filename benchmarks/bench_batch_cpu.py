@@ -59,24 +59,17 @@ def child(args: argparse.Namespace) -> dict[str, Any]:
     from graspscape.services.coordinator import db
     from graspscape.services.coordinator.dispatch.answers import lease_for, report_batch
     from graspscape.services.coordinator.dispatch.catalog import WorkContexts
-    from graspscape.services.coordinator.exploration.service import create_exploration
-    from graspscape.services.coordinator.store.models import ExplorationRow, ObjectRow
-    from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
+    from graspscape.services.coordinator.store.models import ExplorationRow
     from graspscape.shared.wire.codec import decode_as, encode
     from graspscape.shared.wire.messages import LeaseRequest, ResultBatch
 
+    from benchmarks._explorations import create_sphere_exploration
     from tests.factories import fake_results
 
     assert Path(coordinator.__file__).is_relative_to(Path(args.tree or REPO)), coordinator.__file__
     db.upgrade(args.url)
     sessions = db.make_sessionmaker(db.make_engine(args.url))
-    grid = PoseGridSpec(dtheta=0.04, r_min=0.0, r_max=0.05, dr=0.01, attitudes={"rolls": 4})
-    with sessions() as s:
-        obj = ObjectRow(kind="named", name="sphere", properties={})
-        s.add(obj)
-        s.commit()
-        spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid)
-        eid = create_exploration(s, spec=spec, tile_target_poses=100, max_poses=10**7).id
+    eid = create_sphere_exploration(sessions, tile_target_poses=100)
     contexts = WorkContexts()
     request = LeaseRequest(worker_id="bench-1", host="bench", capacity=1).model_dump_json()
     lease_cpu, lease_wall, batch_cpu, batch_wall = [], [], [], []

@@ -53,18 +53,16 @@ import graspscape.services.coordinator.exploration.scheduler as scheduler_module
 from graspscape.services.coordinator import db  # noqa: E402
 from graspscape.services.coordinator.exploration.samples import lattice_of  # noqa: E402
 from graspscape.services.coordinator.exploration.scheduler import ingest_results  # noqa: E402
-from graspscape.services.coordinator.exploration.service import create_exploration  # noqa: E402
 from graspscape.services.coordinator.exploration.specs import spec_of  # noqa: E402
 from graspscape.services.coordinator.manifolds.service import maybe_refresh  # noqa: E402
 from graspscape.services.coordinator.store.models import (  # noqa: E402
     ExplorationRow,
-    ObjectRow,
     PoseRow,
 )
 from graspscape.services.coordinator.store.queue import lease_tiles  # noqa: E402
-from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec  # noqa: E402
 from sqlalchemy import func, select  # noqa: E402
 
+from benchmarks._explorations import create_sphere_exploration  # noqa: E402
 from benchmarks._results import write_results  # noqa: E402
 from benchmarks.bench_query import bench_result  # noqa: E402
 from tests.factories import fake_results  # noqa: E402
@@ -73,24 +71,14 @@ PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 LEASE_CHUNK = 16  # tiles a worker asks for at once
 
 
-def _explore(sessions: Any, batch: int) -> int:
-    # ~190k poses: more than any run of `seconds` at the target rate can use up.
-    grid = PoseGridSpec(dtheta=0.04, r_min=0.0, r_max=0.05, dr=0.01, attitudes={"rolls": 4})
-    with sessions() as s:
-        obj = ObjectRow(kind="named", name="sphere", properties={})
-        s.add(obj)
-        s.commit()
-        spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid)
-        return create_exploration(s, spec=spec, tile_target_poses=batch, max_poses=10**7).id
-
-
 def run_threads(url: str, *, seconds: float, batch: int, threads: int,
                 own_explorations: bool, rate_guess: float = 30_000) -> dict[str, float]:
     """K threads storing already made batches at once (see the module's docstring)."""
     db.upgrade(url)
     engine = db.make_engine(url)
     sessions = db.make_sessionmaker(engine)
-    explorations = [_explore(sessions, batch) for _ in range(threads if own_explorations else 1)]
+    explorations = [create_sphere_exploration(sessions, tile_target_poses=batch)
+                    for _ in range(threads if own_explorations else 1)]
     wanted = int(rate_guess * seconds / batch) + 1
     work: queue.Queue[Any] = queue.Queue()
     with sessions() as s:  # in lease order: the explorations' tiles interleave
@@ -147,7 +135,7 @@ def run(url: str, *, seconds: float, batch: int, refresh: bool = False) -> dict[
     db.upgrade(url)
     engine = db.make_engine(url)
     sessions = db.make_sessionmaker(engine)
-    eid = _explore(sessions, batch)
+    eid = create_sphere_exploration(sessions, tile_target_poses=batch)
     poses = batches = 0
     busy = upkeep = 0.0
     with sessions() as s:
