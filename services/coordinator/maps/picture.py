@@ -64,6 +64,7 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
         default_title,
         in_flight,
         stored_default,
+        version_text,
     )
     from graspscape.services.coordinator.objects.geometry import object_mesh
 
@@ -92,9 +93,7 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
     r_level = None if r_mm is None else r_level_of(lattice, r_mm)
     if title is None:
         title = f"{spec.label or ''}".strip()
-    # The version of what is drawn: the poses and the manifold table stored for them.
-    version = (str(session.get_bind().url), exploration_id, row.created_at, row.updated_at,
-               row.poses_done, row.manifolds_poses_done, row.manifolds_final)
+    version = _version(session, row)
     key = (*version, fmt, cut, phi0_deg, attitude, title, r_level)
     if (found := _kept(key)) is not None:
         return found
@@ -110,9 +109,11 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
                     stored := stored_default(session, row)) is not None:
                 # A viewer shown the default picture asks for other cuts next: their reading
                 # starts now, in the background, not at the next request.
-                read_ahead(session.get_bind(), version, exploration_id, lattice, row.object_id)
+                read_ahead(session.get_bind(), version, exploration_id, lattice, row.object_id,
+                           version_text(row))
                 return _keep(key, stored)
-            points, manifolds = _drawn_from(session, version, exploration_id, lattice)
+            points, manifolds = _drawn_from(session, version, exploration_id, lattice,
+                                            version_text(row))
             data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),
                               cut=cut, phi0=math.radians(phi0_deg), attitude=attitude,
                               fmt=fmt, title=title, r_level=r_level, panel_key=version)
@@ -123,6 +124,26 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
 
 
 DRAW_AHEAD_WAIT_S = 60.0
+
+
+def _version(session: Session, row: ExplorationRow) -> tuple[object, ...]:
+    """The version of what is drawn: the poses and the manifold table stored for them."""
+    return (str(session.get_bind().url), row.id, row.created_at, row.updated_at,
+            row.poses_done, row.manifolds_poses_done, row.manifolds_final)
+
+
+def version_points(session: Session, exploration_id: int) -> MapPoints:
+    """The points of the map's current version, kept or read (what a draw-ahead stores
+    beside its picture: maps/stored.py)."""
+    from graspscape.services.coordinator.exploration.samples import lattice_of
+    from graspscape.services.coordinator.exploration.specs import spec_of
+    from graspscape.services.coordinator.maps.stored import version_text
+
+    row = session.get(ExplorationRow, exploration_id)
+    if row is None:
+        raise NotFound(f"exploration {exploration_id} does not exist")
+    return _drawn_from(session, _version(session, row), exploration_id,
+                       lattice_of(spec_of(row)), version_text(row))[0]
 
 
 def _kept(key: tuple[object, ...]) -> tuple[bytes, int, int] | None:
@@ -142,11 +163,14 @@ def _keep(key: tuple[object, ...], value: tuple[bytes, int, int]) -> tuple[bytes
 
 
 def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: int,
-                lattice: Lattice) -> tuple[MapPoints, list[ManifoldSummary]]:
+                lattice: Lattice, stored_version: str) -> tuple[MapPoints, list[ManifoldSummary]]:
     """The poses' arrays and the manifold table at `version`, read once per version: a
-    request for a version being read (by a read-ahead) waits for that read."""
+    request for a version being read (by a read-ahead) waits for that read. The arrays are
+    those stored beside the drawn-ahead picture where it was drawn at this version
+    (`stored_version`: maps/stored.version_text), else read from the poses."""
     from graspscape.services.coordinator.manifolds.service import stored_manifolds
     from graspscape.services.coordinator.maps.points import stored_points
+    from graspscape.services.coordinator.maps.stored import stored_points_at
 
     with _lock:
         found = _inputs.get(version)
@@ -160,8 +184,10 @@ def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: i
         if found is not None:
             return found
         try:
-            found = (stored_points(session, exploration_id, lattice),
-                     stored_manifolds(session, exploration_id))
+            points = stored_points_at(session, exploration_id, stored_version)
+            if points is None:
+                points = stored_points(session, exploration_id, lattice)
+            found = (points, stored_manifolds(session, exploration_id))
             with _lock:
                 _inputs[version] = found
                 while len(_inputs) > INPUT_VERSIONS:
@@ -173,7 +199,7 @@ def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: i
 
 
 def read_ahead(bind: Any, version: tuple[object, ...], exploration_id: int, lattice: Lattice,
-               object_id: int) -> threading.Thread | None:
+               object_id: int, stored_version: str) -> threading.Thread | None:
     """Read a version's inputs and derive what every cut needs (maps/derived.py: directions,
     attitude 0's tree, the 3D view's markers) in a background thread, unless kept or being
     read: at 1M poses that is ~3 s of the first cut's ~4 s, paid while the viewer looks at
@@ -182,21 +208,22 @@ def read_ahead(bind: Any, version: tuple[object, ...], exploration_id: int, latt
         if version in _inputs or version in _reading or version in _ahead:
             return None
         thread = threading.Thread(target=_read_ahead, name=f"map-read-{exploration_id}",
-                                  args=(bind, version, exploration_id, lattice, object_id))
+                                  args=(bind, version, exploration_id, lattice, object_id,
+                                        stored_version))
         _ahead[version] = thread
     thread.start()
     return thread
 
 
 def _read_ahead(bind: Any, version: tuple[object, ...], exploration_id: int, lattice: Lattice,
-                object_id: int) -> None:
+                object_id: int, stored_version: str) -> None:
     from graspscape.services.coordinator.maps import derived
     from graspscape.services.coordinator.maps.render import _COLOURS
     from graspscape.services.coordinator.objects.geometry import object_mesh
 
     try:
         with Session(bind) as session:
-            points, _ = _drawn_from(session, version, exploration_id, lattice)
+            points, _ = _drawn_from(session, version, exploration_id, lattice, stored_version)
             mesh = object_mesh(session, object_id)
         derived.known(points, lattice, 0)
         derived.markers(lattice, points, mesh, _COLOURS)

@@ -11,6 +11,7 @@ of `Point` (ring, azimuth, r index, attitude), the order the pictures have alway
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -168,6 +169,33 @@ def stored_points(session: Session, exploration_id: int, lattice: Lattice) -> Ma
                          np.zeros(0, dtype=bool), empty, empty)
     whole = MapPoints(*(np.concatenate([getattr(p, f) for p in parts]) for f in _FIELDS))
     return whole.take(_point_order(whole))
+
+
+def points_bytes(points: MapPoints) -> bytes:
+    """The points as stored beside a drawn-ahead picture (maps/stored.py): each array in an
+    uncompressed `.npz`, integers in the smallest type that holds their values (~36 bytes a
+    point instead of ~65), read back by `points_from_bytes` as the same values and dtypes."""
+    arrays: dict[str, np.ndarray] = {}
+    for name in _FIELDS:
+        values = getattr(points, name)
+        if values is None:
+            continue
+        if values.dtype.kind == "i" and len(values):
+            values = values.astype(np.result_type(np.min_scalar_type(int(values.min())),
+                                                  np.min_scalar_type(int(values.max()))))
+        arrays[name] = values
+        arrays[f"{name}.dtype"] = np.array(getattr(points, name).dtype.str)
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return buffer.getvalue()
+
+
+def points_from_bytes(data: bytes) -> MapPoints:
+    """The points `points_bytes` stored, in their first dtypes (a cast back is exact)."""
+    with np.load(io.BytesIO(data), allow_pickle=False) as stored:
+        values = {name: stored[name].astype(str(stored[f"{name}.dtype"]), copy=False)
+                  for name in _FIELDS if name in stored.files}
+    return MapPoints(**values)
 
 
 def _point_order(pts: MapPoints) -> np.ndarray:

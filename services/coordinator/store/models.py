@@ -155,6 +155,9 @@ class MapPictureRow(Base):
     manifolds: Mapped[int] = mapped_column(Integer)
     poses: Mapped[int] = mapped_column(Integer)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    # The map's points at `version`, packed (maps/points.points_bytes; migration 0015): a
+    # process that has not read this version loads them instead of reading every pose.
+    points: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True, deferred=True)
 
 
 class ManifoldRow(Base):

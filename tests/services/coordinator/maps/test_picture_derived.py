@@ -126,9 +126,17 @@ def test_a_stored_default_picture_served_reads_the_other_cuts_inputs_ahead(
         s.commit()
     picture._cache.clear()
     picture._inputs.clear()  # another process, or a restart: nothing read yet
-    reads = []
-    read = points.stored_points
+    reads = []  # the version's points read: from the poses, or stored with the picture
+    read, load = points.stored_points, stored.stored_points_at
     monkeypatch.setattr(points, "stored_points", lambda *a, **k: reads.append(1) or read(*a, **k))
+
+    def counted_load(*args, **kwargs):  # type: ignore[no-untyped-def]
+        found = load(*args, **kwargs)
+        if found is not None:
+            reads.append(1)
+        return found
+
+    monkeypatch.setattr(stored, "stored_points_at", counted_load)
     with sessions() as s:
         picture.picture_bytes(s, eid, "png", title=stored.default_title(eid))
         assert reads == [] or picture._ahead  # the stored picture: read in the background

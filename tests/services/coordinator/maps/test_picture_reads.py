@@ -21,10 +21,10 @@ from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.exploration import ExplorationSpec
 from matplotlib.figure import Figure
 from PIL import Image
-from sqlalchemy import select
+from sqlalchemy import select, update
 
 from tests.factories import oracle_result
-from tests.services.coordinator.manifolds.test_picture import _ring_map
+from tests.services.coordinator.manifolds.test_picture import _ring_map, explore
 
 
 def _pixels(png: bytes) -> np.ndarray:
@@ -171,6 +171,66 @@ def test_a_running_maps_default_picture_is_drawn_ahead_and_served_only_at_its_ve
         stored.wait_prerendered()
         assert s.scalars(select(MapPictureRow.version)
                          .where(MapPictureRow.exploration_id == eid)).one() == kept.version
+
+
+def _same_points(a: points.MapPoints, b: points.MapPoints) -> bool:
+    return all(
+        (x is None and y is None) or (x is not None and y is not None and x.dtype == y.dtype
+                                      and np.array_equal(x, y, equal_nan=x.dtype.kind == "f"))
+        for x, y in ((getattr(a, f), getattr(b, f)) for f in points._FIELDS))
+
+
+def test_packed_points_come_back_as_the_same_values_and_dtypes() -> None:
+    _mesh, _lattice, pts, _summary = _ring_map()
+    rng = np.random.default_rng(0)
+    n = 5_000  # beyond int8 and int16 ranges too, NaN μs, no robust labels
+    wide = points.MapPoints(
+        rng.integers(0, 400, n), rng.integers(0, 70_000, n), rng.integers(0, 3, n),
+        np.zeros(n, dtype=np.int64), rng.random(n), np.where(rng.random(n) < 0.3, np.nan, 1.0),
+        rng.random(n) < 0.5, rng.integers(-1, 40_000, n))
+    empty = wide.take(slice(0, 0))
+    for case in (pts, wide, empty):
+        back = points.points_from_bytes(points.points_bytes(case))
+        assert _same_points(back, case) and len(back) == len(case)
+    assert len(points.points_bytes(wide)) < 0.6 * n * 65  # the integers packed small
+
+
+@pytest.mark.slow  # renders, and the draw-ahead's thread
+def test_a_process_that_has_not_read_a_version_loads_the_points_stored_with_its_picture(
+        sessions, named_object, monkeypatch) -> None:
+    """The draw-ahead stores the version's points beside the default picture (migration
+    0015): a cut asked in a process that has not read that version (a restart) draws the same
+    picture from them without reading a pose; at another version they are not used."""
+    from graspscape.services.coordinator.exploration.samples import lattice_of
+    from graspscape.services.coordinator.exploration.specs import spec_of
+
+    monkeypatch.setattr(stored, "PRERENDER_MIN_POSES", 0)
+    stored.draw_finished_maps_ahead()  # as the coordinator's API does
+    eid = explore(sessions, named_object("sphere"))
+    stored.wait_prerendered()
+    with sessions() as s:
+        row = s.get(ExplorationRow, eid)
+        assert row.manifolds_final
+        kept = stored.stored_points_at(s, eid, stored.version_text(row))
+        assert kept is not None
+        assert _same_points(kept, points.stored_points(s, eid, lattice_of(spec_of(row))))
+        expected = picture.picture_bytes(s, eid, "png", cut="vertical", phi0_deg=60.0)
+    reads = []
+    read = points.stored_points
+    monkeypatch.setattr(points, "stored_points", lambda *a, **k: reads.append(1) or read(*a, **k))
+    picture._cache.clear()  # another process: nothing drawn or read in its memory
+    picture._inputs.clear()
+    with sessions() as s:
+        got = picture.picture_bytes(s, eid, "png", cut="vertical", phi0_deg=60.0)
+        assert not reads and got[1:] == expected[1:]
+        assert np.array_equal(_pixels(got[0]), _pixels(expected[0]))
+        s.execute(update(MapPictureRow).values(version="older"))
+        s.commit()
+        picture._cache.clear()
+        picture._inputs.clear()
+        assert picture.picture_bytes(s, eid, "png", cut="vertical", phi0_deg=60.0)[1:] == (
+            expected[1:])
+        assert reads == [1]  # read from the poses: the stored points are another version's
 
 
 @pytest.mark.slow  # four small renders
