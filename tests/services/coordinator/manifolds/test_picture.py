@@ -42,6 +42,21 @@ def explore(sessions, object_id: int) -> int:  # type: ignore[no-untyped-def]
     return eid
 
 
+def explored_and_drawn_ahead(sessions, object_id: int, monkeypatch) -> int:  # type: ignore[no-untyped-def]
+    """`explore`, with the finished map's default picture drawn ahead as the coordinator's API
+    has it (maps/stored.py; small maps included) and that draw done."""
+    from graspscape.services.coordinator.maps import stored
+    from graspscape.services.coordinator.store.models import ExplorationRow
+
+    monkeypatch.setattr(stored, "PRERENDER_MIN_POSES", 0)
+    stored.draw_finished_maps_ahead()
+    eid = explore(sessions, object_id)
+    stored.wait_prerendered()
+    with sessions() as s:
+        assert s.get(ExplorationRow, eid).manifolds_final
+    return eid
+
+
 @pytest.mark.slow  # seconds of physics or subprocess: the default run stays near 90 s
 def test_stored_points_are_the_computed_maps_points_and_labels(sessions, named_object) -> None:
     eid = explore(sessions, named_object("sphere"))
@@ -247,13 +262,9 @@ def test_a_finished_maps_default_picture_is_drawn_ahead_and_read_from_its_row(
     from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
     from sqlalchemy import select, update
 
-    monkeypatch.setattr(stored, "PRERENDER_MIN_POSES", 0)
-    stored.draw_finished_maps_ahead()  # as the coordinator's API does
-    eid = explore(sessions, named_object("sphere"))
-    stored.wait_prerendered()
+    eid = explored_and_drawn_ahead(sessions, named_object("sphere"), monkeypatch)
     with sessions() as s:
         row = s.get(ExplorationRow, eid)
-        assert row.manifolds_final
         kept = s.scalars(select(MapPictureRow).where(MapPictureRow.exploration_id == eid)).one()
         assert kept.png.startswith(b"\x89PNG") and kept.version == stored.version_text(row)
         png = kept.png

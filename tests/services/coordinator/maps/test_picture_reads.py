@@ -24,7 +24,10 @@ from PIL import Image
 from sqlalchemy import select, update
 
 from tests.factories import oracle_result
-from tests.services.coordinator.manifolds.test_picture import _ring_map, explore
+from tests.services.coordinator.manifolds.test_picture import (
+    _ring_map,
+    explored_and_drawn_ahead,
+)
 
 
 def _pixels(png: bytes) -> np.ndarray:
@@ -204,13 +207,9 @@ def test_a_process_that_has_not_read_a_version_loads_the_points_stored_with_its_
     from graspscape.services.coordinator.exploration.samples import lattice_of
     from graspscape.services.coordinator.exploration.specs import spec_of
 
-    monkeypatch.setattr(stored, "PRERENDER_MIN_POSES", 0)
-    stored.draw_finished_maps_ahead()  # as the coordinator's API does
-    eid = explore(sessions, named_object("sphere"))
-    stored.wait_prerendered()
+    eid = explored_and_drawn_ahead(sessions, named_object("sphere"), monkeypatch)
     with sessions() as s:
         row = s.get(ExplorationRow, eid)
-        assert row.manifolds_final
         kept = stored.stored_points_at(s, eid, stored.version_text(row))
         assert kept is not None
         assert _same_points(kept, points.stored_points(s, eid, lattice_of(spec_of(row))))
