@@ -85,21 +85,77 @@ def scattered_index(pts: MapPoints) -> np.ndarray:
 def markers(lattice: Lattice, points: MapPoints, mesh: Any | None,
             palette: Sequence[Any]) -> tuple[np.ndarray, list[Any]]:
     """The 3D view's marker positions and colours, derived once per points, lattice and mesh
-    (`MapPoints.memo`; the mesh is the object's cached one, kept with them so its id stays)."""
+    (`MapPoints.memo`; the mesh is the object's cached one, kept with them so its id stays),
+    or taken from what `unpack` put back (derived with the map's own mesh)."""
     key = ("markers", lattice, id(mesh))
     found = points.memo.get(key)
     if found is None:
-        viable = np.flatnonzero(points.viable)
-        which = viable[scattered_index(points.take(viable))]
-        pts = points.take(which)
-        pos, colours = np.zeros((0, 3)), []
-        if len(pts):
-            dirs = directions(points, lattice)[which]
-            # One ray per direction, not per pose: many r levels and attitudes share one.
-            unique, inverse = np.unique(dirs, axis=0, return_inverse=True)
-            rho = surface_radii(mesh, unique, FALLBACK_RADIUS)[inverse.ravel()]
-            pos = dirs * (rho + pts.r)[:, None]
-            labels = np.where(pts.label >= 0, pts.label, 0).tolist()
-            colours = [palette[i % len(palette)] for i in labels]
+        which, pos = _marker_positions(lattice, points, mesh)
+        labels = np.where(points.label[which] >= 0, points.label[which], 0).tolist()
+        colours = [palette[i % len(palette)] for i in labels]
         found = points.memo[key] = (pos, colours, mesh)
     return found[0], found[1]  # type: ignore[index]
+
+
+def _marker_positions(lattice: Lattice, points: MapPoints,
+                      mesh: Any | None) -> tuple[np.ndarray, np.ndarray]:
+    """Which points the 3D view marks, and where (each direction's surface radius + r)."""
+    kept = points.memo.get(("marker positions", lattice))
+    if kept is not None:
+        return kept  # type: ignore[return-value]
+    viable = np.flatnonzero(points.viable)
+    which = viable[scattered_index(points.take(viable))]
+    pos = np.zeros((0, 3))
+    if len(which):
+        dirs = directions(points, lattice)[which]
+        # One ray per direction, not per pose: many r levels and attitudes share one.
+        unique, inverse = np.unique(dirs, axis=0, return_inverse=True)
+        rho = surface_radii(mesh, unique, FALLBACK_RADIUS)[inverse.ravel()]
+        pos = dirs * (rho + points.r[which])[:, None]
+    found = points.memo[("marker positions", lattice)] = (which, pos)
+    return found
+
+
+# What `packed` stores beside the points (maps/points.points_bytes' `extra`).
+_PACKED = ("directions", "marker_which", "marker_pos")
+
+
+def packed(points: MapPoints, lattice: Lattice, mesh: Any | None) -> dict[str, np.ndarray]:
+    """The derivations a cold cut would otherwise make (~0.35 s of a first cut at 1M poses:
+    a Python call per distinct direction, one ray per marked direction), for storing beside
+    the points: each distinct (ring, azimuth)'s direction in point order, and the 3D view's
+    marked points and positions. `unpack` puts them back as these very values."""
+    dirs = directions(points, lattice)
+    first = _runs(points)
+    which, pos = _marker_positions(lattice, points, mesh)
+    if first is None:  # not in point order (never from the store): nothing to pack
+        return {}
+    return {"directions": dirs[first], "marker_which": which, "marker_pos": pos}
+
+
+def unpack(points: MapPoints, lattice: Lattice, arrays: dict[str, np.ndarray]) -> None:
+    """Put back into `points.memo` what `packed` stored with them (for `lattice`, the map's
+    own); arrays that do not fit the points (another version's) are left unused."""
+    if set(_PACKED) - arrays.keys():
+        return
+    first = _runs(points)
+    unique = arrays["directions"]
+    if first is None or len(first) != len(unique) or unique.shape[1:] != (3,):
+        return
+    run = np.zeros(len(points), dtype=np.int64)
+    if len(points):
+        run[first[1:]] = 1
+    points.memo[("directions", lattice)] = unique[np.cumsum(run)]
+    which, pos = arrays["marker_which"], arrays["marker_pos"]
+    if len(which) == len(pos) and (not len(which) or 0 <= which.min() <= which.max() < len(
+            points)):
+        points.memo[("marker positions", lattice)] = (which.astype(np.int64), pos)
+
+
+def _runs(points: MapPoints) -> np.ndarray | None:
+    """Where each run of one (ring, azimuth) starts, in point order (None: not sorted so)."""
+    code = points.ring.astype(np.int64) * (1 << 32) + points.azimuth
+    if len(code) and bool((code[1:] < code[:-1]).any()):
+        return None
+    return np.flatnonzero(np.r_[True, code[1:] != code[:-1]]) if len(code) else np.zeros(
+        0, dtype=np.int64)

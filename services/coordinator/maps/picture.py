@@ -50,12 +50,14 @@ log = logging.getLogger("graspscape.coordinator.maps")
 
 def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "svg"], *,
                   cut: Cut = "horizontal", phi0_deg: float = 0.0, attitude: int = 0,
-                  title: str | None = None, r_mm: float | None = None, ensure: bool = True
-                  ) -> tuple[bytes, int, int]:
+                  title: str | None = None, r_mm: float | None = None, ensure: bool = True,
+                  use_stored: bool = True) -> tuple[bytes, int, int]:
     """The map (PNG or SVG) with its manifold and lattice pose counts; `r_mm`: only the cut's
     band at that r (snapped to the nearest level of the finest lattice; None: every r);
-    `ensure=False`: the stored table as it is, not brought up to date first.
-    Raises NotFound, InvalidInput (an attitude or r the grid does not have)."""
+    `ensure=False`: the stored table as it is, not brought up to date first;
+    `use_stored=False`: the default picture drawn, not read back from its stored row (a
+    draw-ahead drawing it again). Raises NotFound, InvalidInput (an attitude or r the grid
+    does not have)."""
     from graspscape.services.coordinator.exploration.samples import lattice_of
     from graspscape.services.coordinator.exploration.specs import spec_of
     from graspscape.services.coordinator.manifolds.service import ensure_manifolds
@@ -104,7 +106,7 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
             return found
         try:
             # The default picture, drawn ahead (maps/stored.py).
-            if (fmt, cut, phi0_deg, attitude, title, r_level) == (
+            if use_stored and (fmt, cut, phi0_deg, attitude, title, r_level) == (
                     "png", "horizontal", 0.0, 0, default_title(exploration_id), None) and (
                     stored := stored_default(session, row)) is not None:
                 # A viewer shown the default picture asks for other cuts next: their reading
@@ -184,7 +186,7 @@ def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: i
         if found is not None:
             return found
         try:
-            points = stored_points_at(session, exploration_id, stored_version)
+            points = stored_points_at(session, exploration_id, stored_version, lattice)
             if points is None:
                 points = stored_points(session, exploration_id, lattice)
             found = (points, stored_manifolds(session, exploration_id))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from itertools import chain
 from typing import Any
@@ -171,11 +171,12 @@ def stored_points(session: Session, exploration_id: int, lattice: Lattice) -> Ma
     return whole.take(_point_order(whole))
 
 
-def points_bytes(points: MapPoints) -> bytes:
+def points_bytes(points: MapPoints, extra: Mapping[str, np.ndarray] | None = None) -> bytes:
     """The points as stored beside a drawn-ahead picture (maps/stored.py): each array in an
     uncompressed `.npz`, integers in the smallest type that holds their values (27 MB for the
     1M-pose bench map, ~26 bytes a point instead of ~65), read back by `points_from_bytes` as
-    the same values and dtypes."""
+    the same values and dtypes; `extra`: arrays stored with them as they are (what pictures
+    derive from the points: maps/derived.packed), given back by `unpacked`."""
     arrays: dict[str, np.ndarray] = {}
     for name in _FIELDS:
         values = getattr(points, name)
@@ -186,17 +187,29 @@ def points_bytes(points: MapPoints) -> bytes:
                                                   np.min_scalar_type(int(values.max()))))
         arrays[name] = values
         arrays[f"{name}.dtype"] = np.array(getattr(points, name).dtype.str)
+    for name, values in (extra or {}).items():
+        arrays[f"{_EXTRA}{name}"] = values
     buffer = io.BytesIO()
     np.savez(buffer, **arrays)
     return buffer.getvalue()
 
 
+_EXTRA = "extra."
+
+
 def points_from_bytes(data: bytes) -> MapPoints:
     """The points `points_bytes` stored, in their first dtypes (a cast back is exact)."""
+    return unpacked(data)[0]
+
+
+def unpacked(data: bytes) -> tuple[MapPoints, dict[str, np.ndarray]]:
+    """The points `points_bytes` stored and the `extra` arrays stored with them."""
     with np.load(io.BytesIO(data), allow_pickle=False) as stored:
         values = {name: stored[name].astype(str(stored[f"{name}.dtype"]), copy=False)
                   for name in _FIELDS if name in stored.files}
-    return MapPoints(**values)
+        extra = {name.removeprefix(_EXTRA): stored[name] for name in stored.files
+                 if name.startswith(_EXTRA)}
+    return MapPoints(**values), extra
 
 
 def _point_order(pts: MapPoints) -> np.ndarray:

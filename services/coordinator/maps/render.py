@@ -98,7 +98,8 @@ def cut_field(
         idx = np.flatnonzero(inside.ravel())
         q = derived.embed(dirs[idx], r.ravel()[idx], lattice)
         k = min(NEAREST, len(known))
-        dist, nn = tree.query(q, k=k)
+        # Each query on its own (exact whatever the split), in parallel: ~0.3 s at 1M poses.
+        dist, nn = tree.query(q, k=k, workers=-1)
         dist, nn = dist.reshape(len(idx), k), nn.reshape(len(idx), k)
         klabel, kmu = known.label, known.mu_s
         first = klabel[nn[:, 0]]

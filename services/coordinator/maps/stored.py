@@ -36,6 +36,7 @@ import threading
 import time
 from typing import Any
 
+from graspscape.services.coordinator.exploration.lattice import Lattice
 from graspscape.services.coordinator.maps.points import MapPoints
 from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
 from sqlalchemy import delete, event, select
@@ -80,31 +81,49 @@ def store_default(session: Session, exploration_id: int, *, ensure: bool = True)
     """Render the default picture at the current version and store it (the caller commits).
     `ensure=False`: draw the stored table as it is (a running map's draw-ahead: a refresh is
     the reads' and the ingest's to make, not a background thread's)."""
+    from graspscape.services.coordinator.exploration.samples import lattice_of
+    from graspscape.services.coordinator.exploration.specs import spec_of
+    from graspscape.services.coordinator.maps.derived import packed
     from graspscape.services.coordinator.maps.picture import picture_bytes, version_points
     from graspscape.services.coordinator.maps.points import points_bytes
+    from graspscape.services.coordinator.objects.geometry import object_mesh
 
-    # The stored one out first: drawn again, not read back (the process's memory may still
-    # hold this version's bytes: then they are the picture).
-    session.execute(delete(MapPictureRow).where(MapPictureRow.exploration_id == exploration_id))
+    # Drawn again, not read back (the process's memory may still hold this version's bytes:
+    # then they are the picture). Drawn before the row is written: on SQLite the first write
+    # takes the database's write lock to the commit, and a draw at 1M poses takes seconds in
+    # which every ingest and lease of every exploration would wait (WAL: reads do not).
     data, manifolds, poses = picture_bytes(session, exploration_id, "png",
-                                           title=default_title(exploration_id), ensure=ensure)
+                                           title=default_title(exploration_id), ensure=ensure,
+                                           use_stored=False)
     row = session.get(ExplorationRow, exploration_id)
     assert row is not None  # picture_bytes raised NotFound otherwise
-    # The points beside it (just drawn from, so kept in this process): a cut asked in a
-    # process that has not read this version loads them instead of reading every pose.
-    points = points_bytes(version_points(session, exploration_id))
+    # The points beside it (just drawn from, so kept in this process, with what the picture
+    # derived from them): a cut asked in a process that has not read this version loads
+    # them instead of reading every pose and deriving directions and markers again.
+    kept = version_points(session, exploration_id)
+    points = points_bytes(kept, packed(kept, lattice_of(spec_of(row)),
+                                       object_mesh(session, row.object_id)))
+    session.execute(delete(MapPictureRow).where(MapPictureRow.exploration_id == exploration_id))
     session.add(MapPictureRow(exploration_id=exploration_id, version=version_text(row),
                               png=data, manifolds=manifolds, poses=poses, points=points))
 
 
-def stored_points_at(session: Session, exploration_id: int, version: str) -> MapPoints | None:
-    """The points stored beside the default picture, if drawn at `version`."""
-    from graspscape.services.coordinator.maps.points import points_from_bytes
+def stored_points_at(session: Session, exploration_id: int, version: str,
+                     lattice: Lattice | None = None) -> MapPoints | None:
+    """The points stored beside the default picture, if drawn at `version`; with the map's
+    `lattice`, also what the picture derived from them (maps/derived.unpack)."""
+    from graspscape.services.coordinator.maps.derived import unpack
+    from graspscape.services.coordinator.maps.points import unpacked
 
     data = session.scalar(select(MapPictureRow.points).where(
         MapPictureRow.exploration_id == exploration_id, MapPictureRow.version == version,
         MapPictureRow.points.is_not(None)))
-    return None if data is None else points_from_bytes(bytes(data))
+    if data is None:
+        return None
+    points, extra = unpacked(bytes(data))
+    if lattice is not None:
+        unpack(points, lattice, extra)
+    return points
 
 
 def _render(bind: Any, exploration_id: int, key: tuple[str, int]) -> None:

@@ -79,6 +79,34 @@ def test_a_versions_points_keep_what_the_pictures_derive_from_them() -> None:
     assert kept.take(slice(None)).memo == {}  # a subset keeps nothing of the whole's
 
 
+def test_what_a_picture_derived_comes_back_with_the_stored_points_as_the_same_values() -> None:
+    """Directions and the 3D view's markers stored with the points (maps/derived.packed) are
+    put back as the values deriving them again gives: a cold cut draws the same picture."""
+    from tests.services.coordinator.manifolds.test_picture import _ring_map
+
+    mesh, lattice, pts, _summary = _ring_map()
+    data = points.points_bytes(pts, derived.packed(pts, lattice, mesh))
+    back, extra = points.unpacked(data)
+    derived.unpack(back, lattice, extra)
+    fresh = points.points_from_bytes(data)
+    assert {k[0] for k in back.memo} == {"directions", "marker positions"}
+    assert np.array_equal(derived.directions(back, lattice), fresh.directions(lattice))
+    got = derived.markers(lattice, back, mesh, render._COLOURS)
+    want = derived.markers(lattice, fresh, mesh, render._COLOURS)
+    assert np.array_equal(got[0], want[0]) and got[1] == want[1] and len(got[0]) > 100
+    # Put back, not derived again: moved positions stored come back moved.
+    moved = points.points_from_bytes(data)
+    derived.unpack(moved, lattice, {**extra, "marker_pos": extra["marker_pos"] + 1.0})
+    assert np.array_equal(derived.markers(lattice, moved, mesh, render._COLOURS)[0],
+                          want[0] + 1.0)
+    # Another version's arrays (other points) are not used.
+    other = pts.take(slice(0, len(pts) // 2))
+    derived.unpack(other, lattice, extra)
+    assert other.memo == {}
+    unsorted = pts.take(np.arange(len(pts))[::-1])
+    assert derived.packed(unsorted, lattice, mesh) == {}
+
+
 @pytest.mark.parametrize("db_url", ["sqlite", "postgresql"], indirect=True)
 def test_the_packed_column_gives_each_poses_viability_manifold_and_robust_label(
         sessions, named_object) -> None:
@@ -143,6 +171,6 @@ def test_a_stored_default_picture_served_reads_the_other_cuts_inputs_ahead(
         picture.wait_read_ahead()
         assert reads == [1]
         (kept, _), = picture._inputs.values()
-        assert {k[0] for k in kept.memo} == {"directions", "known", "markers"}
+        assert {k[0] for k in kept.memo} == {"directions", "known", "markers", "marker positions"}
         picture.picture_bytes(s, eid, "png", cut="vertical")
         assert reads == [1]  # the cut drew from what was read ahead

@@ -250,3 +250,40 @@ def test_pictures_drawn_at_once_in_the_servers_threads_all_come_out() -> None:
     for thread in threads:
         thread.join()
     assert not errors
+
+
+@pytest.mark.slow  # a render
+@pytest.mark.parametrize("db_url", ["sqlite"], indirect=True)
+def test_a_draw_ahead_leaves_the_database_to_other_writers_while_it_draws(
+        sessions, named_object, monkeypatch, db_url) -> None:
+    """On SQLite the first write of a transaction holds the database's write lock to its
+    commit: the draw-ahead writes its row after drawing (seconds at 1M poses), so an ingest
+    made meanwhile goes through at once instead of waiting for the draw."""
+    import sqlite3
+
+    eid = _grid(sessions, named_object("sphere"))
+    draw = render.render_map
+    written = []
+
+    def draw_and_write_beside(*args, **kwargs):  # type: ignore[no-untyped-def]
+        data = draw(*args, **kwargs)
+        other = sqlite3.connect(db_url.removeprefix("sqlite:///"), timeout=0.2)
+        try:  # another writer, mid-draw: "database is locked" after 0.2 s if it must wait
+            other.execute("UPDATE explorations SET viable_count = -1 WHERE id = ?", (eid,))
+            other.commit()
+            written.append(1)
+        finally:
+            other.close()
+        return data
+
+    with sessions() as s:
+        ensure_manifolds(s, eid)  # a table up to date: the draw-ahead refreshes nothing
+        s.commit()
+    monkeypatch.setattr(render, "render_map", draw_and_write_beside)
+    with sessions() as s:
+        stored.store_default(s, eid)
+        s.commit()
+    assert written == [1]
+    with sessions() as s:
+        row = s.get(ExplorationRow, eid)
+        assert row.viable_count == -1 and stored.stored_default(s, row) is not None
