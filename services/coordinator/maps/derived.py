@@ -6,7 +6,8 @@ asked for. At 1M poses deriving them costs more than drawing a cut (the tree of 
 ~250k points, a million directions, the markers' unique positions), so they are computed once
 per points and kept in `MapPoints.memo`, which lives as long as picture.py keeps that version's
 points: another cut of the version uses them as they are — the same values, so the same
-picture.
+picture. The directions and the markers are also stored beside a drawn-ahead picture's points
+(`packed`, `unpack`: maps/stored.py), so a process that loads those points derives neither.
 """
 
 from __future__ import annotations

@@ -22,7 +22,12 @@ read's), and a request made while a draw is in flight is drawn after it (the fin
 
 The version's points are stored beside the picture (migration 0015, `stored_points_at`): a
 process that has not read that version loads them (~0.05 s at 1M poses) for its first cut
-instead of reading every pose (~2.3 s).
+instead of reading every pose (~2.3 s), with the directions and 3D markers the picture
+derived from them (maps/derived.packed: a cold first cut 10-26 % faster at 1M).
+
+The row is written after the drawing, in a short transaction: on SQLite a transaction's first
+write holds the database's write lock until its commit, and a draw at 1M poses takes seconds
+in which every other writer would wait (benchmarks/results/draw_ahead_lock.json).
 
 Maps under PRERENDER_MIN_POSES are not drawn ahead: they render in well under a second, and
 the tests' many small explorations would each start a render.
