@@ -126,12 +126,12 @@ def packed(points: MapPoints, lattice: Lattice, mesh: Any | None) -> dict[str, n
     a Python call per distinct direction, one ray per marked direction), for storing beside
     the points: each distinct (ring, azimuth)'s direction in point order, and the 3D view's
     marked points and positions. `unpack` puts them back as these very values."""
-    dirs = directions(points, lattice)
     first = _runs(points)
-    which, pos = _marker_positions(lattice, points, mesh)
     if first is None:  # not in point order (never from the store): nothing to pack
         return {}
-    return {"directions": dirs[first], "marker_which": which, "marker_pos": pos}
+    which, pos = _marker_positions(lattice, points, mesh)
+    return {"directions": directions(points, lattice)[first], "marker_which": which,
+            "marker_pos": pos}
 
 
 def unpack(points: MapPoints, lattice: Lattice, arrays: dict[str, np.ndarray]) -> None:
