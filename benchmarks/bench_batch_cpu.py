@@ -71,7 +71,8 @@ def child(args: argparse.Namespace) -> dict[str, Any]:
     sessions = db.make_sessionmaker(db.make_engine(args.url))
     eid = create_sphere_exploration(sessions, tile_target_poses=100)
     contexts = WorkContexts()
-    request = LeaseRequest(worker_id="bench-1", host="bench", capacity=1).model_dump_json()
+    request = LeaseRequest(worker_id="bench-1", session_key="b" * 32, host="bench",
+                           capacity=1).model_dump_json()
     lease_cpu, lease_wall, batch_cpu, batch_wall = [], [], [], []
     stored = 0
     for _ in range(args.warmup + args.batches):
@@ -84,7 +85,7 @@ def child(args: argparse.Namespace) -> dict[str, Any]:
         c1, w1 = time.thread_time(), time.perf_counter()
         assert len(replies) == 1
         tile = leased.tiles[0]
-        data = ResultBatch(worker_id="bench-1", tile_id=tile.tile_id,
+        data = ResultBatch(worker_id="bench-1", session_key="b" * 32, tile_id=tile.tile_id,
                            lease_epoch=tile.lease_epoch,
                            results=fake_results(tile.poses(), seed=tile.tile_id)
                            ).model_dump_json().encode()

@@ -57,9 +57,17 @@ def _batch_payload(template: dict[str, object], worker_id: str, tile) -> tuple[b
         result["effective_r"] = pose.r
         results.append(result)
     batch = {"v": WIRE_VERSION, "kind": "result_batch", "worker_id": worker_id,
-             "tile_id": tile.tile_id, "lease_epoch": tile.lease_epoch, "results": results,
+             "session_key": _session_key(worker_id), "tile_id": tile.tile_id,
+             "lease_epoch": tile.lease_epoch, "results": results,
              "final": True, "release": False, "error": None}
     return json.dumps(batch).encode(), len(results)
+
+
+def _session_key(worker_id: str) -> str:
+    """A simulated worker's session key (the coordinator binds the id to it)."""
+    import hashlib
+
+    return hashlib.sha256(worker_id.encode()).hexdigest()[:32]
 
 
 def simulated_worker(endpoint: str, worker_id: str, pose_s: float, stop: threading.Event,
@@ -83,7 +91,8 @@ def simulated_worker(endpoint: str, worker_id: str, pose_s: float, stop: threadi
     with tally.lock:
         tally.connected += 1
     token = session.liveliness().declare_token(keys.alive_key(worker_id))
-    request = encode(LeaseRequest(worker_id=worker_id, host="fleet", capacity=1))
+    request = encode(LeaseRequest(worker_id=worker_id, session_key=_session_key(worker_id),
+                                  host="fleet", capacity=1))
     idle = 0.5
     try:
         while not stop.is_set():

@@ -28,6 +28,10 @@ class NotLeaseHolder(Conflict):
     worker holds it, or it was leased again since): refused whole, nothing stored."""
 
 
+class WorkerIdTaken(Conflict):
+    """A lease request or batch under a worker id that another session registered."""
+
+
 class InvalidInput(CoordinatorError):
     status_code = 422
 

@@ -21,7 +21,7 @@ _TAU = 2 * math.pi
 
 
 class Pose(BaseModel):
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, allow_inf_nan=False)
 
     theta: float = Field(ge=0.0, le=math.pi, description="polar angle from object +z, rad")
     phi: float = Field(description="azimuth about object +z, rad (wrapped to [0, 2π))")

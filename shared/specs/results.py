@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
+from typing import Any
 
 from graspscape.shared.specs.pose import Pose
 from pydantic import BaseModel, ConfigDict, Field
+
+# Every number of a result is finite: a blown-up simulation's NaN or ∞ is refused where a
+# result is built or decoded (and serialized it would go out as `null`), never stored.
+_FINITE = ConfigDict(frozen=True, allow_inf_nan=False)
 
 
 class Outcome(StrEnum):
@@ -18,7 +24,7 @@ class Outcome(StrEnum):
 
 
 class ContactPoint(BaseModel):
-    model_config = ConfigDict(frozen=True)
+    model_config = _FINITE
 
     link: str
     position_object: tuple[float, float, float] = Field(description="in the object frame, m")
@@ -28,7 +34,7 @@ class ContactPoint(BaseModel):
 class GraspSignature(BaseModel):
     """What kind of grasp formed: which links touch where, and how the hand ended up."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = _FINITE
 
     links_in_contact: tuple[str, ...]
     contacts: tuple[ContactPoint, ...]
@@ -41,7 +47,7 @@ class GraspConfiguration(BaseModel):
     The base pose is the gripper frame's (palm surface centre, z the palm normal) at the end of
     closing, relative to the object's centre-of-mass frame at that instant (docs/datasets.md)."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = _FINITE
 
     base_position: tuple[float, float, float]
     base_orientation: tuple[float, float, float, float] = Field(description="quaternion xyzw")
@@ -49,6 +55,8 @@ class GraspConfiguration(BaseModel):
 
 
 class PhaseTimes(BaseModel):
+    model_config = ConfigDict(allow_inf_nan=False)
+
     reset_s: float = 0.0
     approach_s: float = 0.0
     closing_s: float = 0.0
@@ -65,7 +73,7 @@ class RobustnessReport(BaseModel):
     docs/metrics.md). A field is None where its test did not run (not chosen, or the pose was
     not held); a margin is also None where the grasp drops even at the nominal value."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = _FINITE
 
     torque_margin_nm: float | None = Field(
         default=None, ge=0.0,
@@ -91,6 +99,8 @@ class RobustnessReport(BaseModel):
 
 
 class PoseResult(BaseModel):
+    model_config = ConfigDict(allow_inf_nan=False)
+
     pose: Pose
     pose_key: str
     outcome: Outcome
@@ -122,3 +132,23 @@ class PoseResult(BaseModel):
     error: str | None = Field(
         default=None, max_length=2000,
         description="outcome `error` only: the exception the evaluation of this pose raised")
+
+
+def nonfinite_fields(value: Any, path: str = "") -> list[str]:
+    """Where a result (any model, dict, sequence or number) holds NaN or ±∞: `name=value` per
+    number, by dotted path. A result built with `model_copy(update=…)` or
+    `model_construct` skips validation, so the worker checks every number before it sends."""
+    if isinstance(value, float):
+        return [] if math.isfinite(value) else [f"{path or 'value'}={value}"]
+    if isinstance(value, BaseModel):
+        items: Any = ((name, getattr(value, name)) for name in type(value).model_fields)
+    elif isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, tuple)):
+        items = enumerate(value)
+    else:
+        return []
+    found: list[str] = []
+    for name, item in items:
+        found += nonfinite_fields(item, f"{path}.{name}" if path else str(name))
+    return found

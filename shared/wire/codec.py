@@ -9,7 +9,13 @@ from __future__ import annotations
 import json
 from typing import TypeVar
 
-from graspscape.shared.wire.messages import WIRE_VERSION, ErrorCode, ErrorReply, Message
+from graspscape.shared.wire.messages import (
+    WIRE_VERSION,
+    BatchHeader,
+    ErrorCode,
+    ErrorReply,
+    Message,
+)
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
 _ADAPTER: TypeAdapter[Message] = TypeAdapter(Message)
@@ -58,6 +64,15 @@ def decode(data: bytes | bytearray | memoryview) -> Message | ErrorReply:
             for e in exc.errors()[:5]
         ]
         return error(ErrorCode.MALFORMED, "; ".join(parts))
+
+
+def batch_header(data: bytes | bytearray | memoryview) -> BatchHeader | None:
+    """The sender and lease of a result batch whose body was refused; None when even those
+    cannot be read (then nobody can be held to it)."""
+    try:
+        return BatchHeader.model_validate_json(bytes(data))
+    except ValidationError:
+        return None
 
 
 def decode_reply_error(data: bytes | bytearray | memoryview) -> ErrorReply:

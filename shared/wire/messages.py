@@ -28,11 +28,16 @@ WIRE_VERSION = 1
 INT32_MAX = 2**31 - 1
 Id = Annotated[int, Field(ge=1, le=INT32_MAX)]
 Count = Annotated[int, Field(ge=0, le=INT32_MAX)]
+# A worker process's session key: a random secret it makes at start and sends with every
+# lease request and batch. The coordinator binds the worker id to the first key it sees
+# (store/workers.py), so another session cannot borrow the id without knowing the key.
+SessionKey = Annotated[str, Field(pattern=r"^[0-9a-f]{32,64}$")]
 
 
 class _Message(BaseModel):
-    # Unknown fields are ignored, not refused: a newer peer may add optional fields.
-    model_config = ConfigDict(frozen=True, extra="ignore")
+    # Unknown fields are ignored, not refused: a newer peer may add optional fields. NaN and
+    # ±∞ are refused (JSON's `NaN` token included): no number of the protocol may be one.
+    model_config = ConfigDict(frozen=True, extra="ignore", allow_inf_nan=False)
 
     v: Literal[1] = WIRE_VERSION
 
@@ -42,6 +47,7 @@ class LeaseRequest(_Message):
 
     kind: Literal["lease_request"] = "lease_request"
     worker_id: str = Field(pattern=WORKER_ID_PATTERN)
+    session_key: SessionKey
     host: str = Field(default="", max_length=255)
     capacity: int = Field(ge=1, le=64, description="tiles it can take now")
     # Tiles the worker still works on. Any other tile leased to this worker id was lost on
@@ -74,7 +80,7 @@ class LeasedTile(BaseModel):
     to report under. The store's lease returns it (store/tiles.py) and the wire message
     `TileLease` extends it, so the two cannot drift apart."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, allow_inf_nan=False)
 
     tile_id: Id
     exploration_id: Id
@@ -119,12 +125,32 @@ class ResultBatch(_Message):
 
     kind: Literal["result_batch"] = "result_batch"
     worker_id: str = Field(pattern=WORKER_ID_PATTERN)
+    session_key: SessionKey
     tile_id: Id
     lease_epoch: Count
     results: list[PoseResult]
     final: bool = True
     release: bool = False
     error: str | None = Field(default=None, max_length=4000)
+
+
+class BatchHeader(BaseModel):
+    """Who sent a result batch, for what lease: read alone from a batch that is refused as a
+    whole (a result fails validation), so that the refusal counts as an attempt of the tile
+    when its sender holds the lease (codec.batch_header)."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    kind: Literal["result_batch"]
+    worker_id: str = Field(pattern=WORKER_ID_PATTERN)
+    session_key: SessionKey
+    tile_id: Id
+    lease_epoch: Count
+
+    @classmethod
+    def of(cls, batch: ResultBatch) -> BatchHeader:
+        return cls(kind=batch.kind, worker_id=batch.worker_id, session_key=batch.session_key,
+                   tile_id=batch.tile_id, lease_epoch=batch.lease_epoch)
 
 
 class Ack(_Message):
@@ -173,6 +199,9 @@ class ErrorCode(StrEnum):
     # A result batch that is not from the tile's latest lease (another worker's lease, or
     # an older epoch): refused whole; final for that lease, the tile is someone else's now.
     NOT_LEASE_HOLDER = "not_lease_holder"
+    # A lease request or batch under a worker id that another session registered (its
+    # session key differs): refused, nothing leased, released or stored.
+    WORKER_ID_TAKEN = "worker_id_taken"
     NOT_FOUND = "not_found"
     UNAVAILABLE = "unavailable"  # the coordinator could not serve it now; retry
     INTERNAL = "internal"

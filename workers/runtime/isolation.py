@@ -10,7 +10,7 @@ tile: if the first `SYSTEMATIC_AFTER` evaluated poses all raise, the tile is rep
 from __future__ import annotations
 
 from graspscape.shared.specs.pose import Pose
-from graspscape.shared.specs.results import Outcome, PoseResult
+from graspscape.shared.specs.results import Outcome, PoseResult, nonfinite_fields
 
 SYSTEMATIC_AFTER = 3
 _MAX_MESSAGE = 2000
@@ -21,6 +21,17 @@ def error_result(pose: Pose, exc: BaseException) -> PoseResult:
     message = f"{type(exc).__name__}: {exc}"[:_MAX_MESSAGE]
     return PoseResult(pose=pose, pose_key=pose.key(), outcome=Outcome.ERROR, viable=False,
                       mu_s=0.0, error=message)
+
+
+def finite_or_error(result: PoseResult) -> PoseResult:
+    """The result, or where any of its numbers is NaN or ±∞ (a blown-up simulation) the
+    pose's `error` record naming them: its values are not sent. Sent as they are, they would
+    go out as `null` and the coordinator would refuse the whole batch."""
+    bad = nonfinite_fields(result)
+    if not bad:
+        return result
+    shown = ", ".join(bad[:5]) + (f" and {len(bad) - 5} more" if len(bad) > 5 else "")
+    return error_result(result.pose, ValueError(f"non-finite result values: {shown}"))
 
 
 class ErrorStreak:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import secrets
 import signal
 import socket
 import threading
@@ -21,9 +22,7 @@ from typing import Any
 import zenoh
 from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.specs.pose import Pose
-from graspscape.shared.specs.results import (
-    PoseResult,
-)
+from graspscape.shared.specs.results import PoseResult
 from graspscape.shared.wire import keys
 from graspscape.shared.wire.codec import decode_as, decode_reply_error, encode
 from graspscape.shared.wire.messages import (
@@ -37,7 +36,7 @@ from graspscape.shared.wire.session import zenoh_config
 from graspscape.workers.runtime.backoff import Backoff
 from graspscape.workers.runtime.config import WorkerConfig
 from graspscape.workers.runtime.instant import instant_result
-from graspscape.workers.runtime.isolation import ErrorStreak, error_result
+from graspscape.workers.runtime.isolation import ErrorStreak, error_result, finite_or_error
 from graspscape.workers.runtime.objects import ObjectCache, ObjectFetchError
 from graspscape.workers.runtime.watch import CoordinatorWatch, stop_with_parent
 
@@ -52,6 +51,8 @@ class WorkerProcess:
     def __init__(self, config: WorkerConfig, index: int) -> None:
         self.config = config
         self.worker_id = f"{config.name}-p{index}-{os.getpid()}"
+        # Sent with every request: the coordinator binds the id to it (never logged).
+        self.session_key = secrets.token_hex(16)
         self.stop = threading.Event()
         self.stop_deadline: float | None = None
         self.session: zenoh.Session | None = None
@@ -131,7 +132,7 @@ class WorkerProcess:
 
     def _lease(self) -> list[TileLease]:
         request = LeaseRequest(
-            worker_id=self.worker_id,
+            worker_id=self.worker_id, session_key=self.session_key,
             host=socket.gethostname()[:255],
             capacity=self.config.tiles_per_request,
             # The tile whose batch is still on its way is not lost: it stays leased.
@@ -199,8 +200,8 @@ class WorkerProcess:
         for pose in poses:
             if self.stop.is_set():
                 break
-            try:
-                result = self._evaluate(tile, obj, pose, donors)
+            try:  # every number checked: a NaN is the pose's error, never the batch's
+                result = finite_or_error(self._evaluate(tile, obj, pose, donors))
             except Exception as exc:  # this pose cannot be evaluated: store why, go on
                 log.exception("%s: tile %d: pose %s raised", self.worker_id, tile.tile_id,
                               pose.key())
@@ -267,7 +268,8 @@ class WorkerProcess:
 
     def _batch(self, tile: TileLease, results: list[PoseResult], *, final: bool,
                release: bool = False, error: str | None = None) -> ResultBatch:
-        return ResultBatch(worker_id=self.worker_id, tile_id=tile.tile_id,
+        return ResultBatch(worker_id=self.worker_id, session_key=self.session_key,
+                           tile_id=tile.tile_id,
                            lease_epoch=tile.lease_epoch, results=results, final=final,
                            release=release, error=error)
 

@@ -8,8 +8,7 @@ with object fetches (one short transaction each), so a lease never queues behind
 commit; leasing stays safe against the ingest threads and other coordinators by the store's
 own means (SKIP LOCKED, lease epochs, lease-owner checks; each answer's store work is
 dispatch/answers.py's). Nothing raised while serving a query escapes: bad input gets an
-error reply, store failures an "unavailable" reply the worker retries, both counted; a store
-outage is logged once per episode (dispatch/outage.py), anything else with its traceback.
+error reply, anything raised one as dispatch/refusals.py says, with one log line at most.
 """
 
 from __future__ import annotations
@@ -20,20 +19,27 @@ import queue
 import shutil
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
 import zenoh
-from graspscape.services.coordinator.dispatch.answers import lease_for, report_batch
+from graspscape.services.coordinator.dispatch.alive import alive_workers
+from graspscape.services.coordinator.dispatch.answers import (
+    count_refusal,
+    lease_for,
+    report_batch,
+)
 from graspscape.services.coordinator.dispatch.catalog import WorkContexts, mesh_by_hash
 from graspscape.services.coordinator.dispatch.counters import DispatchCounters
 from graspscape.services.coordinator.dispatch.leases import lease_owners, requeue_lost
-from graspscape.services.coordinator.dispatch.outage import StoreOutage, is_store_outage
+from graspscape.services.coordinator.dispatch.outage import StoreOutage
+from graspscape.services.coordinator.dispatch.refusals import failed_reply
+from graspscape.services.coordinator.dispatch.sessions import WorkerSessions
+from graspscape.services.coordinator.errors import WorkerIdTaken
 from graspscape.services.coordinator.settings import Settings
 from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.wire import keys
-from graspscape.shared.wire.codec import decode_as, encode, error
+from graspscape.shared.wire.codec import batch_header, decode_as, encode, error
 from graspscape.shared.wire.messages import (
     ErrorCode,
     ErrorReply,
@@ -65,6 +71,7 @@ class Dispatcher:
         self.counters = DispatchCounters(registry)
         self.outage = StoreOutage()
         self.contexts = WorkContexts()
+        self.worker_sessions = WorkerSessions()
         # kind -> its pool's queue: result batches apart from leases and object fetches.
         ingest: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
         leases: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
@@ -76,9 +83,8 @@ class Dispatcher:
         self._session: zenoh.Session | None = None
         self._declared: list[Any] = []
         self._stopping = threading.Event()
-        # SQLite has one writer: handler threads that contend for it sleep in its busy
-        # handler (up to 100 ms a turn). Taking turns here instead keeps the writes back to
-        # back while decoding and replying still overlap. PostgreSQL writes concurrently.
+        # SQLite has one writer: threads contending for it sleep in its busy handler (up to
+        # 100 ms a turn); taking turns here keeps writes back to back. PostgreSQL: concurrent.
         backend = sessions.kw["bind"].dialect.name if sessions.kw.get("bind") else ""
         self._store_turn = threading.Lock() if backend == "sqlite" else contextlib.nullcontext()
         self._users_dir: Path | None = None  # the dictionary made from user + password
@@ -122,8 +128,7 @@ class Dispatcher:
                 log.error("zenoh session could not open (%s); retrying", exc)
 
     def _users_file(self, listen: list[str]) -> Path | None:
-        """The dictionary the embedded peer checks workers against: users_file, or one made
-        of user + password (zenoh reads only files), private to this process."""
+        """The logins the embedded peer admits: users_file, or one of user + password."""
         if not listen or not self.zenoh_settings.authenticates:
             return None
         if self.zenoh_settings.users_file is not None:
@@ -195,7 +200,6 @@ class Dispatcher:
                 entity.undeclare()
             except Exception:  # already gone with a closing session
                 log.debug("undeclare failed", exc_info=True)
-        self._declared = []
         for work, pool in self._pools:
             for _ in pool:
                 try:
@@ -204,7 +208,7 @@ class Dispatcher:
                     break
         for thread in [*self._threads, *(t for _, pool in self._pools for t in pool)]:
             thread.join(timeout=5)
-        self._threads, self._pools = [], []
+        self._threads, self._pools, self._declared = [], [], []
         if self._session is not None:
             self._session.close()
             self._session = None
@@ -256,35 +260,49 @@ class Dispatcher:
     def _answer(self, kind: str, query: zenoh.Query) -> None:
         data = query.payload.to_bytes() if query.payload is not None else b""
         handler = {"lease": self._lease, "results": self._results, "object": self._object}[kind]
-        outage = False
+        cause: str | None = ""  # the log line's, never the reply's
         try:
             reply = handler(query, data)
             self.outage.succeeded()
-        except Exception as exc:
-            outage = is_store_outage(exc)
-            if outage:  # the database down, a dropped connection: one line per episode
-                self.outage.failed(kind, exc)
-            else:  # anything else is a bug: its traceback
-                log.exception("%s query failed", kind)
-            reply = error(ErrorCode.UNAVAILABLE, f"{type(exc).__name__}: {exc}")
+        except Exception as exc:  # never its text in the reply; a batch is counted
+            reply, cause = failed_reply(kind, exc, self.outage, lambda: self._count(
+                data, "the coordinator could not store the batch"))
         if isinstance(reply, ErrorReply):
             self.counters.queries.labels(kind, "error").inc()
             self.counters.errors.labels(kind, reply.code.value).inc()
-            if not outage:
-                log.warning("%s query refused (%s): %s", kind, reply.code.value, reply.message)
+            if cause is not None:  # None: an outage, logged once per episode
+                log.warning("%s query refused (%s): %s%s", kind, reply.code.value,
+                            reply.message, cause)
             query.reply_err(encode(reply))
         else:
             self.counters.queries.labels(kind, "ok").inc()
+
+    def _count(self, data: bytes, reason: str) -> str:
+        """count_refusal for a refused batch's raw bytes ("" when nobody can be held to it)."""
+        header = batch_header(data)
+        if header is None:
+            return ""
+        try:
+            with self._store_turn, self.sessions() as session:
+                return count_refusal(session, header, reason,
+                                     max_attempts=self.settings.queue.max_attempts,
+                                     sessions=self.worker_sessions)
+        except Exception:  # the refusal stands; the lease expiry remains
+            log.debug("counting a refused batch failed", exc_info=True)
+            return ""
 
     def _lease(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:
         request = decode_as(data, LeaseRequest)
         if isinstance(request, ErrorReply):
             return request
         n = min(request.capacity, self.zenoh_settings.max_tiles_per_request)
-        with self._store_turn, self.sessions() as session:
-            leased = lease_for(session, request, n=n,
-                               lease_seconds=self.settings.queue.lease_seconds,
-                               contexts=self.contexts)
+        try:
+            with self._store_turn, self.sessions() as session:
+                leased = lease_for(session, request, n=n,
+                                   lease_seconds=self.settings.queue.lease_seconds,
+                                   contexts=self.contexts, sessions=self.worker_sessions)
+        except WorkerIdTaken as exc:
+            return error(ErrorCode.WORKER_ID_TAKEN, exc.message)
         if leased.lost:
             self.counters.tiles_requeued.labels("reply_lost").inc(leased.lost)
             log.info("%d tiles of %s whose lease reply was lost: queued again",
@@ -296,11 +314,15 @@ class Dispatcher:
 
     def _results(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:
         batch = decode_as(data, ResultBatch)
+        if isinstance(batch, ErrorReply) and batch.code == ErrorCode.MALFORMED:
+            # A result fails validation (a NaN, say): counted as an attempt of its tile.
+            return error(batch.code, batch.message + self._count(data, "batch refused: "
+                                                                 + batch.message))
         if isinstance(batch, ErrorReply):
             return batch
         self.counters.poses_received.inc(len(batch.results))
         with self._store_turn, self.sessions() as session:
-            reported = report_batch(session, batch,
+            reported = report_batch(session, batch, sessions=self.worker_sessions,
                                     max_attempts=self.settings.queue.max_attempts)
         if isinstance(reported.reply, ErrorReply):
             return reported.reply
@@ -345,38 +367,16 @@ class Dispatcher:
             return
         self.counters.workers_lost.inc()
         with self._store_turn, self.sessions() as session:
-            requeued, failed = requeue_lost(
-                session, worker_ids=[worker_id], max_attempts=self.settings.queue.max_attempts
-            )
+            requeued, failed = requeue_lost(session, worker_ids=[worker_id],
+                                            max_attempts=self.settings.queue.max_attempts)
         if requeued or failed:
             self.counters.tiles_requeued.labels("worker_lost").inc(requeued)
             log.info("worker %s lost: %d tiles queued again, %d failed", worker_id,
                      requeued, failed)
 
     def alive_workers(self, timeout_s: float = 2.0) -> set[str] | None:
-        """Worker ids with a liveliness token now; None when the question could not be asked."""
-        if self._session is None:
-            return None
-        found: set[str] = set()
-        done = threading.Event()
-
-        def collect(reply: zenoh.Reply) -> None:
-            if reply.ok is not None:
-                worker_id = keys.worker_of_alive_key(str(reply.ok.key_expr))
-                if worker_id:
-                    found.add(worker_id)
-
-        # A callback, not the bounded (256) default channel: a client session answers the query
-        # in place, into the handler, before get() returns and under the session's lock; with
-        # more workers than the channel holds, get() waited for a reader that runs only after
-        # it returns, and the session's network thread for the lock (the whole session hung).
-        start = time.monotonic()
-        self._session.liveliness().get(
-            keys.ALIVE_ALL, zenoh.handlers.Callback(collect, done.set), timeout=timeout_s)
-        # Never half an answer (live workers' leases would go back): not one cut by its timeout.
-        if not done.wait(timeout_s + 5.0) or time.monotonic() - start >= timeout_s:
-            return None
-        return found
+        """Worker ids with a liveliness token now; None when it could not be asked."""
+        return None if self._session is None else alive_workers(self._session, timeout_s)
 
     def _orphan_sweep(self) -> None:
         # Leases of workers that died while this coordinator was down (no DELETE will come):

@@ -7,13 +7,13 @@ the exploration's strategy has decided what comes next.
 once and tells exactly which rows are new, so the exploration's counters only count those: a
 batch sent twice (a retry after a lost ack) leaves the same rows and the same counts.
 
-A batch is taken only from the tile's latest lease: its epoch must be the tile's current
-`lease_epoch`, and while the tile is leased its worker must be the `lease_owner`. Anything
-else (another worker's id, an older epoch: the tile was leased again since) is refused whole
-with NotLeaseHolder and stores nothing. Once the latest lease ended without a new one (expired
-or lost and queued again, cancelled, failed) the row names no holder any more; a report under
-that epoch is still taken, since its poses can only be the tile's own (below) and storing
-them loses nothing. Every result must be a pose of the tile (its cells × r levels ×
+A batch is taken only from the holder of the tile's latest lease: its epoch must be the tile's
+current `lease_epoch`, and its worker the one that lease went to (`lease_holder`, stored with
+the lease). Anything else (another worker's id, an older epoch: the tile was leased again
+since) is refused whole with NotLeaseHolder and stores nothing. Once the latest lease ended
+without a new one (expired or lost and queued again, cancelled, failed), its holder's late
+report under that epoch is still taken, since its poses can only be the tile's own (below)
+and storing them loses nothing. Every result must be a pose of the tile (its cells × r levels ×
 attitudes): one foreign pose refuses the whole batch. `final` finishes the tile (leased, or
 queued under the same epoch) only when every pose of the tile is stored after the batch;
 otherwise the batch is stored and the report lists the poses still missing.
@@ -72,7 +72,7 @@ class IngestReport(BaseModel):
 
 # The statements of every batch, built once (building them took longer than running them).
 _TILE = select(
-    TileRow.exploration_id, TileRow.state, TileRow.lease_epoch, TileRow.lease_owner,
+    TileRow.exploration_id, TileRow.state, TileRow.lease_epoch, TileRow.lease_holder,
     TileRow.cells, TileRow.r_levels, TileRow.attitudes, ExplorationRow.created_at,
 ).join(ExplorationRow, ExplorationRow.id == TileRow.exploration_id).where(
     TileRow.id == bindparam("tile_id"))
@@ -100,16 +100,19 @@ _FINISH_EXPLORATIONS_PIPED = Piped(FINISH_EXPLORATIONS, {"ids": [0], "now": None
 
 
 def _not_holder(tile: Any, tile_id: int, lease_epoch: int, worker_id: str) -> str | None:
-    """Why a report under (worker_id, lease_epoch) is not from the tile's latest lease, or
-    None when it is."""
+    """Why a report under (worker_id, lease_epoch) is not from the holder of the tile's latest
+    lease, or None when it is. The holder is stored with the lease (`lease_holder`) and kept
+    when the lease ends, so late results are taken from that worker alone."""
     if tile.lease_epoch < 1 or lease_epoch != tile.lease_epoch:
         latest = (f"its latest lease is epoch {tile.lease_epoch}" if tile.lease_epoch >= 1
                   else "it was never leased")
         return (f"tile {tile_id} has no lease of epoch {lease_epoch} to report for ({latest}, "
                 f"state {tile.state}): a late or forged report, nothing of it stored")
-    if tile.state == TileState.LEASED and tile.lease_owner != worker_id:
-        return (f"tile {tile_id} is leased to {tile.lease_owner} under epoch {lease_epoch}, "
-                f"not to {worker_id}: nothing of the report stored")
+    if tile.lease_holder != worker_id:
+        holder = tile.lease_holder or "a worker not recorded"
+        verb = "is leased" if tile.state == TileState.LEASED else "was leased"
+        return (f"tile {tile_id} {verb} to {holder} under epoch {lease_epoch}, not to "
+                f"{worker_id}: nothing of the report stored")
     return None
 
 
@@ -146,13 +149,45 @@ def store_batch(
     then on PostgreSQL the COMMIT goes in the counter update's round trip (`committed`), so
     the exploration's row lock is held for one round trip and the commit's flush.
 
-    Raises NotFound (no such tile), NotLeaseHolder (not from the tile's latest lease) or
-    InvalidInput (a result whose key does not match its pose, or a pose not of this tile);
-    a refused batch stores nothing."""
+    Raises NotFound (no such tile), NotLeaseHolder (not from the holder of the tile's latest
+    lease) or InvalidInput (a result whose key does not match its pose, or a pose not of this
+    tile); a refused batch stores nothing."""
     now = now or utcnow()
     session.flush()  # what the session holds goes first, as autoflush would do it
-    connection = session.connection()
-    tile = connection.execute(_TILE, {"tile_id": tile_id}).one_or_none()
+    tile = _reported_tile(session, tile_id, lease_epoch, worker_id)
+    # The tile's pose keys (its cells × r levels × attitudes, as the worker expands them;
+    # refinement and search tiles are such products too, exploration/tiling.group_tiles).
+    tile_keys = (frozenset(tile_pose_keys(tile.cells, tile.r_levels, tile.attitudes))
+                 if results or final else frozenset())
+    rows, robustness = _batch_rows(session, tile_id, results, tile_keys)
+    eid = tile.exploration_id
+    # The epochs match (checked above).
+    movable = final and tiles.finishable(tile.state)
+    returned, moved, missing = _insert(session, (eid, tile_id, worker_id, now), rows,
+                                       robustness, tile_keys, movable, lease_epoch)
+    inserted = len(returned)
+    report = _report(results, inserted, TileState.DONE if moved else tile.state, moved,
+                     missing)
+    if not (inserted or moved):  # nothing to count, nothing that could end the exploration
+        return StoredBatch(report, eid, None, None)
+    # Last, the exploration's counters: their row lock, held to the commit, makes the batches
+    # of one exploration take turns only from here on (the strategy reacts under it too);
+    # validation, insert and tile run concurrently. A batch moves its tile before it takes the
+    # lock (fail_tile and the requeue lock, then move theirs), so whichever takes it last
+    # reads every other tile as committed in the finish check after it (a statement of its
+    # own: one that waited on the lock would still read the tiles from before; on PostgreSQL
+    # the two go in one round trip, still two statements).
+    commit = quiet is not None and is_postgres(session) and quiet(eid, tile.created_at)
+    status, created_at = _count(session, {"exploration_id": eid, "inserted": inserted,
+                                          "viable": sum(1 for v in returned if v),
+                                          "now": now},
+                                finish=moved, commit=commit)
+    return StoredBatch(report, eid, status, created_at, commit)
+
+
+def _reported_tile(session: Session, tile_id: int, lease_epoch: int, worker_id: str) -> Any:
+    """The tile a batch reports for, once its sender is known to hold the latest lease."""
+    tile = session.connection().execute(_TILE, {"tile_id": tile_id}).one_or_none()
     if tile is None:
         session.rollback()
         raise NotFound(f"tile {tile_id} does not exist (was its exploration deleted?)")
@@ -160,10 +195,13 @@ def store_batch(
     if refusal is not None:
         session.rollback()
         raise NotLeaseHolder(refusal)
-    # The tile's pose keys (its cells × r levels × attitudes, as the worker expands them;
-    # refinement and search tiles are such products too, exploration/tiling.group_tiles).
-    tile_keys = (frozenset(tile_pose_keys(tile.cells, tile.r_levels, tile.attitudes))
-                 if results or final else frozenset())
+    return tile
+
+
+def _batch_rows(session: Session, tile_id: int, results: Sequence[PoseResult],
+                tile_keys: frozenset[str]) -> tuple[dict[str, tuple[Any, ...]], bool]:
+    """The rows to insert by pose key, and whether any has robustness columns; every result
+    must be a pose of the tile under its own key, or the whole batch is refused."""
     rows: dict[str, tuple[Any, ...]] = {}
     foreign: list[str] = []
     robustness = any(result.robustness is not None for result in results)
@@ -184,59 +222,42 @@ def store_batch(
             f"{len(foreign)} pose(s) of the batch are not poses of tile {tile_id}: "
             f"{_shown(foreign)}; the whole batch is refused, nothing of it stored"
         )
+    return rows, robustness
 
-    moved = False
-    state = tile.state
-    # The epochs match (checked above).
-    movable = final and tiles.finishable(tile.state)
-    eid = tile.exploration_id
-    batch = (eid, tile_id, worker_id, now)
-    if pipelined := (movable and len(rows) == len(tile_keys) and is_postgres(session)):
+
+def _insert(session: Session, batch: tuple[Any, ...], rows: dict[str, tuple[Any, ...]],
+            robustness: bool, tile_keys: frozenset[str], movable: bool, lease_epoch: int
+            ) -> tuple[list[bool], bool, list[str]]:
+    """Insert the new rows and, with `movable`, finish the tile if every pose of it is stored:
+    the new rows' `viable` flags, whether the tile moved, and the poses still missing."""
+    connection = session.connection()
+    eid, tile_id, _, now = batch
+    if movable and len(rows) == len(tile_keys) and is_postgres(session):
         # A complete batch on PostgreSQL: the insert, the key-share lock and the tile's move,
         # as below, in one round trip (none of them waits for another's answer).
         returned, moved = _insert_and_finish(connection, batch, list(rows.values()),
                                              robustness, lease_epoch)
-    else:
-        returned = (insert_new(session, batch, list(rows.values()), robustness)
-                    if rows else [])
-    inserted = len(returned)
-    viable = sum(1 for v in returned if v)
-    if not (inserted or movable):
-        return StoredBatch(_report(results, 0, state, False, []), eid, None, None)
+        return returned, moved, []
+    returned = insert_new(session, batch, list(rows.values()), robustness) if rows else []
+    if not (returned or movable):
+        return returned, False, []
+    # A shared (key) lock on the exploration's row before the tile's, as fail_tile and the
+    # requeue take their exclusive one (queue.lock_explorations): no crosswise waits. The
+    # insert's foreign key check took it already.
+    if not returned:
+        connection.execute(_KEY_SHARE, {"exploration_id": eid}).all()
     missing: list[str] = []
-    if not pipelined:
-        # A shared (key) lock on the exploration's row before the tile's, as fail_tile and
-        # the requeue take their exclusive one (queue.lock_explorations): no crosswise waits.
-        # The insert's foreign key check took it already.
-        if not inserted:
-            connection.execute(_KEY_SHARE, {"exploration_id": eid}).all()
-        if movable and len(rows) < len(tile_keys):
-            # Not every pose of the tile is in the batch (rows ⊆ tile_keys): the tile is done
-            # only if the rest is stored already. Under the tile's row lock, so this reads the
-            # batches of this tile committed before and two such batches take turns.
-            tiles.lock(session, tile_id)
-            absent = sorted(tile_keys.difference(rows))
-            missing = sorted(set(absent) - _stored_keys(connection, eid, absent))
-            movable = not missing
-        if movable:
-            moved = tiles.finish(session, tile_id=tile_id, lease_epoch=lease_epoch, now=now)
-    if moved:
-        state = TileState.DONE
-    report = _report(results, inserted, state, moved, missing)
-    if not (inserted or moved):  # nothing to count, nothing that could end the exploration
-        return StoredBatch(report, eid, None, None)
-    # Last, the exploration's counters: their row lock, held to the commit, makes the batches
-    # of one exploration take turns only from here on (the strategy reacts under it too);
-    # validation, insert and tile run concurrently. A batch moves its tile before it takes the
-    # lock (fail_tile and the requeue lock, then move theirs), so whichever takes it last
-    # reads every other tile as committed in the finish check after it (a statement of its
-    # own: one that waited on the lock would still read the tiles from before; on PostgreSQL
-    # the two go in one round trip, still two statements).
-    commit = quiet is not None and is_postgres(session) and quiet(eid, tile.created_at)
-    status, created_at = _count(session, {"exploration_id": eid, "inserted": inserted,
-                                          "viable": viable, "now": now},
-                                finish=moved, commit=commit)
-    return StoredBatch(report, eid, status, created_at, commit)
+    if movable and len(rows) < len(tile_keys):
+        # Not every pose of the tile is in the batch (rows ⊆ tile_keys): the tile is done
+        # only if the rest is stored already. Under the tile's row lock, so this reads the
+        # batches of this tile committed before and two such batches take turns.
+        tiles.lock(session, tile_id)
+        absent = sorted(tile_keys.difference(rows))
+        missing = sorted(set(absent) - _stored_keys(connection, eid, absent))
+        movable = not missing
+    moved = movable and tiles.finish(session, tile_id=tile_id, lease_epoch=lease_epoch,
+                                     now=now)
+    return returned, moved, missing
 
 
 def _count(session: Session, counted: dict[str, Any], *, finish: bool, commit: bool = False

@@ -133,6 +133,9 @@ class TileRow(Base):
     # them only under the tile's current epoch (and from lease_owner while it is leased), so
     # a late report from a lease that was given to another worker is refused.
     lease_epoch: Mapped[int] = mapped_column(Integer, default=0)
+    # The worker the lease of `lease_epoch` went to, kept after the lease ends (lease_owner
+    # is cleared): a late batch under that epoch is taken only from it (migration 0016).
+    lease_holder: Mapped[str | None] = mapped_column(String(128))
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     last_error: Mapped[str | None] = mapped_column(Text)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow)
@@ -306,5 +309,8 @@ class WorkerRow(Base):
     id: Mapped[str] = mapped_column(String(128), primary_key=True)
     host: Mapped[str] = mapped_column(String(255))
     capacity: Mapped[int] = mapped_column(Integer)
+    # SHA-256 of the session key of the process that registered the id: requests under the
+    # id with another key are refused (dispatch/sessions.py, migration 0016).
+    session_hash: Mapped[str | None] = mapped_column(String(64))
     first_seen: Mapped[datetime] = mapped_column(default=utcnow)
     last_seen: Mapped[datetime] = mapped_column(default=utcnow)

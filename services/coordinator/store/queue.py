@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from datetime import datetime, timedelta
 
-from graspscape.services.coordinator.errors import Conflict, NotFound
+from graspscape.services.coordinator.errors import Conflict, NotFound, WorkerIdTaken
 from graspscape.services.coordinator.store import tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.dialect import is_postgres
@@ -57,8 +57,11 @@ def lease_tiles(
     host: str = "",
     capacity: int = 1,
     now: datetime | None = None,
+    session_hash: str | None = None,
 ) -> list[LeasedTile]:
-    """Lease up to n queued tiles to a worker, oldest exploration first."""
+    """Lease up to n queued tiles to a worker, oldest exploration first. With `session_hash`
+    the worker id is bound to that session if it is not bound yet, and WorkerIdTaken is
+    raised (nothing leased) if it is bound to another."""
     if n < 1:
         return []
     now = now or utcnow()
@@ -69,7 +72,12 @@ def lease_tiles(
     exploration_ids = sorted({t.exploration_id for t in leased})
     if exploration_ids:
         session.connection().execute(_START_EXPLORATIONS, {"ids": exploration_ids, "now": now})
-    touch_worker(session, worker_id=worker_id, host=host, capacity=capacity, now=now)
+    bound = touch_worker(session, worker_id=worker_id, host=host, capacity=capacity, now=now,
+                         session_hash=session_hash)
+    if session_hash is not None and bound != session_hash:
+        # Another session registered the id between the caller's check and this lease.
+        session.rollback()
+        raise WorkerIdTaken(f"worker id {worker_id} belongs to another session")
     session.commit()
     return leased
 

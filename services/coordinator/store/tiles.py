@@ -6,8 +6,8 @@ exploration); failed → queued again on a retry. Each function is one statement
 of statements) inside the caller's transaction: the callers (store/queue.py, store/ingest.py,
 dispatch/leases.py, the exploration service and scheduler) decide when to commit and which
 exploration rows to lock first (store/queue.lock_explorations). Nothing else in the
-coordinator writes `TileRow.state`, `lease_owner`, `lease_expires_at`, `lease_epoch` or
-`attempts`, so the rules of the queue can be read in one module.
+coordinator writes `TileRow.state`, `lease_owner`, `lease_holder`, `lease_expires_at`,
+`lease_epoch` or `attempts`, so the rules of the queue can be read in one module.
 """
 
 from __future__ import annotations
@@ -70,6 +70,7 @@ def _lease_statement(*, skip_locked: bool) -> Any:
         .values(
             state=TileState.LEASED,
             lease_owner=bindparam("owner"),
+            lease_holder=bindparam("owner"),  # kept when the lease ends (lease_owner is not)
             lease_expires_at=bindparam("expires"),
             lease_epoch=TileRow.lease_epoch + 1,
             attempts=TileRow.attempts + 1,
