@@ -16,10 +16,12 @@ from graspscape.shared.wire.messages import (
     ObjectRequest,
 )
 
+SESSION_KEY = "5e55" * 8  # a worker session's key (any 32 hex digits)
+
 
 def test_round_trip() -> None:
     for message in (
-        LeaseRequest(worker_id="host-1-p0-42", capacity=2, holding=[3]),
+        LeaseRequest(session_key=SESSION_KEY, worker_id="host-1-p0-42", capacity=2, holding=[3]),
         Ack(tile_id=1, lease_epoch=2, inserted=3, duplicates=0, tile_state="done"),
         Ack(tile_id=1, lease_epoch=2, inserted=1, duplicates=0, tile_state="leased",
             missing=["0.100000/0.200000/0.010000/0.000000/0.000000/0.000000"]),
@@ -33,7 +35,7 @@ def test_round_trip() -> None:
 
 
 def test_newer_optional_fields_are_ignored() -> None:
-    raw = json.loads(encode(LeaseRequest(worker_id="w", capacity=1)))
+    raw = json.loads(encode(LeaseRequest(session_key=SESSION_KEY, worker_id="w", capacity=1)))
     raw["priority"] = "high"
     assert isinstance(decode(json.dumps(raw).encode()), LeaseRequest)
 

@@ -28,6 +28,8 @@ from graspscape.shared.wire.codec import decode, encode
 from graspscape.shared.wire.messages import ObjectRef, ResultBatch, TileLease
 from graspscape.shared.wire.session import zenoh_config
 
+SESSION_KEY = "5e55" * 8  # a worker session's key (any 32 hex digits)
+
 
 def _free_port() -> int:
     with socket.socket() as s:
@@ -82,7 +84,8 @@ def _messages() -> list[TileLease | ResultBatch]:
         settings=SimSettings(policy_name="haptic"),
         configuration_match=ConfigurationMatch(),
     )
-    batch = ResultBatch(worker_id="host-1:p0@9", tile_id=2**31 - 1, lease_epoch=3,
+    batch = ResultBatch(session_key=SESSION_KEY,
+                        worker_id="host-1:p0@9", tile_id=2**31 - 1, lease_epoch=3,
                         results=[_held(poses[0]), _dropped(poses[1])], final=False,
                         release=False, error=None)
     return [lease, batch]

@@ -26,6 +26,8 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 REPO = Path(__file__).resolve().parents[4]
+# The session key of the made-up workers of these tests (a real process makes a random one).
+SESSION_KEY = "5e55" * 8
 
 
 def free_port() -> int:

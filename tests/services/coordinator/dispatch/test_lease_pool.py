@@ -29,7 +29,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from tests.conftest import _postgres, _sessions
-from tests.services.coordinator.dispatch.support import free_port, submit, wait_for
+from tests.services.coordinator.dispatch.support import SESSION_KEY, free_port, submit, wait_for
 from tests.services.coordinator.dispatch.test_protocol import lease, made_up
 
 
@@ -82,7 +82,8 @@ def test_a_lease_is_answered_while_every_ingest_thread_waits_on_a_commit(
 ) -> None:
     eid = submit(pg_sessions, dtheta_deg=90.0, tile_poses=3)
     (held,) = lease(client, "w1")
-    batch = ResultBatch(worker_id="w1", tile_id=held.tile_id, lease_epoch=held.lease_epoch,
+    batch = ResultBatch(session_key=SESSION_KEY,
+                        worker_id="w1", tile_id=held.tile_id, lease_epoch=held.lease_epoch,
                         results=made_up(held), final=True)
     conninfo, schema = _conninfo(pg_url)
     acks: list[object] = []
@@ -103,7 +104,8 @@ def test_a_lease_is_answered_while_every_ingest_thread_waits_on_a_commit(
         wait_for(lambda: _waiting_on_a_lock(admin), 10, "the batch to wait on the row lock")
         start = time.monotonic()
         replies = list(client.get(keys.LEASE_QUERY,
-                                  payload=encode(LeaseRequest(worker_id="w2", capacity=1)),
+                                  payload=encode(LeaseRequest(session_key=SESSION_KEY,
+                                                              worker_id="w2", capacity=1)),
                                   timeout=5, consolidation=zenoh.ConsolidationMode.NONE))
         waited = time.monotonic() - start
         leased = [decode(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]

@@ -35,7 +35,7 @@ from prometheus_client import CollectorRegistry
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from tests.services.coordinator.dispatch.support import free_port, submit, wait_for
+from tests.services.coordinator.dispatch.support import SESSION_KEY, free_port, submit, wait_for
 
 
 @pytest.fixture
@@ -81,7 +81,8 @@ def ask(session: zenoh.Session, key: str, payload: bytes) -> list[tuple[str, obj
 
 def lease(session: zenoh.Session, worker_id: str, capacity: int = 1) -> list[TileLease]:
     replies = ask(session, keys.LEASE_QUERY,
-                  encode(LeaseRequest(worker_id=worker_id, capacity=capacity)))
+                  encode(LeaseRequest(session_key=SESSION_KEY,
+                                      worker_id=worker_id, capacity=capacity)))
     tiles = [m for _, m in replies if isinstance(m, TileLease)]
     assert len(tiles) == len(replies), replies
     return tiles
@@ -100,7 +101,8 @@ def test_one_reply_per_tile_on_distinct_keys(
     client: zenoh.Session, any_sessions: sessionmaker[Session]
 ) -> None:
     submit(any_sessions, tile_poses=3)
-    replies = ask(client, keys.LEASE_QUERY, encode(LeaseRequest(worker_id="w-1", capacity=4)))
+    replies = ask(client, keys.LEASE_QUERY, encode(LeaseRequest(session_key=SESSION_KEY,
+                                                                worker_id="w-1", capacity=4)))
     assert len(replies) == 4
     assert {k for k, _ in replies} == {keys.lease_reply_key(m.tile_id) for _, m in replies}
     tile = replies[0][1]
@@ -113,7 +115,7 @@ def test_same_batch_twice_leaves_one_row_each(
 ) -> None:
     exploration_id = submit(any_sessions, tile_poses=3)
     (tile,) = lease(client, "w-1")
-    batch = encode(ResultBatch(worker_id="w-1", tile_id=tile.tile_id,
+    batch = encode(ResultBatch(session_key=SESSION_KEY, worker_id="w-1", tile_id=tile.tile_id,
                                lease_epoch=tile.lease_epoch, results=made_up(tile)))
     key = keys.results_key(tile.tile_id, tile.lease_epoch)
     (first,) = ask(client, key, batch)
@@ -173,7 +175,8 @@ def test_result_with_wrong_pose_key_is_refused_and_nothing_stored(
     (tile,) = lease(client, "w-1")
     results = made_up(tile)
     results[1] = results[1].model_copy(update={"pose_key": "0/0/0/0/0/0"})
-    batch = ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+    batch = ResultBatch(session_key=SESSION_KEY,
+                        worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
                         results=results)
     ((where, message),) = ask(client, keys.results_key(tile.tile_id, tile.lease_epoch),
                               encode(batch))
@@ -199,7 +202,8 @@ def test_partial_batch_with_release_requeues_uncounted(
 ) -> None:
     submit(any_sessions, tile_poses=3)
     (tile,) = lease(client, "w-1")
-    batch = ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+    batch = ResultBatch(session_key=SESSION_KEY,
+                        worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
                         results=made_up(tile)[:1], final=False, release=True)
     ((_, ack),) = ask(client, keys.results_key(tile.tile_id, tile.lease_epoch), encode(batch))
     assert isinstance(ack, Ack) and ack.inserted == 1 and ack.tile_state == "queued"
@@ -213,7 +217,8 @@ def test_error_report_counts_an_attempt(
 ) -> None:
     submit(any_sessions, tile_poses=3)
     (tile,) = lease(client, "w-1")
-    batch = ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+    batch = ResultBatch(session_key=SESSION_KEY,
+                        worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
                         results=[], final=False, error="pybullet exploded")
     ((_, ack),) = ask(client, keys.results_key(tile.tile_id, tile.lease_epoch), encode(batch))
     assert isinstance(ack, Ack) and ack.tile_state == "queued"
@@ -280,13 +285,16 @@ def test_lease_context_follows_a_reused_exploration_id(
 @pytest.mark.parametrize(
     ("key", "message", "reason"),
     [
-        ("gs/results/1/1", {"kind": "result_batch", "worker_id": "w", "tile_id": 2**70,
+        ("gs/results/1/1", {"kind": "result_batch", "worker_id": "w", "session_key": SESSION_KEY,
+                            "tile_id": 2**70,
                             "lease_epoch": 1, "results": []},
          "result_batch.tile_id: Input should be less than or equal to 2147483647"),
-        ("gs/results/1/1", {"kind": "result_batch", "worker_id": "w", "tile_id": 1,
+        ("gs/results/1/1", {"kind": "result_batch", "worker_id": "w", "session_key": SESSION_KEY,
+                            "tile_id": 1,
                             "lease_epoch": -(2**64), "results": []},
          "result_batch.lease_epoch: Input should be greater than or equal to 0"),
-        (keys.LEASE_QUERY, {"kind": "lease_request", "worker_id": "w", "capacity": 1,
+        (keys.LEASE_QUERY, {"kind": "lease_request", "worker_id": "w", "session_key": SESSION_KEY,
+                            "capacity": 1,
                             "holding": [2**70]},
          "lease_request.holding.0: Input should be less than or equal to 2147483647"),
     ],
@@ -414,13 +422,17 @@ def test_a_batch_from_a_worker_that_does_not_hold_the_lease_is_refused(
     (tile,) = lease(client, "w-1")
     key = keys.results_key(tile.tile_id, tile.lease_epoch)
     forged = [
-        ResultBatch(worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+        ResultBatch(session_key=SESSION_KEY,
+                    worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
                     results=made_up(tile)),
-        ResultBatch(worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+        ResultBatch(session_key=SESSION_KEY,
+                    worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
                     results=[], final=False, error="forged failure"),
-        ResultBatch(worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+        ResultBatch(session_key=SESSION_KEY,
+                    worker_id="w-intruder", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
                     results=[], final=False, release=True),
-        ResultBatch(worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch + 1,
+        ResultBatch(session_key=SESSION_KEY,
+                    worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch + 1,
                     results=made_up(tile)),
     ]
     refusals = []
@@ -438,7 +450,7 @@ def test_a_batch_from_a_worker_that_does_not_hold_the_lease_is_refused(
         assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
         assert session.get(ExplorationRow, exploration_id).status == "running"
     # The holder's batch is taken.
-    (reply,) = ask(client, key, encode(ResultBatch(
+    (reply,) = ask(client, key, encode(ResultBatch(session_key=SESSION_KEY,
         worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
         results=made_up(tile))))
     assert isinstance(reply[1], Ack) and reply[1].tile_state == "done"
@@ -450,7 +462,8 @@ def test_a_batch_with_a_pose_of_another_tile_is_refused_with_its_key(
     submit(any_sessions, tile_poses=3)
     mine, other = lease(client, "w-1", capacity=2)
     stranger = made_up(other)[1]
-    batch = ResultBatch(worker_id="w-1", tile_id=mine.tile_id, lease_epoch=mine.lease_epoch,
+    batch = ResultBatch(session_key=SESSION_KEY,
+                        worker_id="w-1", tile_id=mine.tile_id, lease_epoch=mine.lease_epoch,
                         results=[*made_up(mine), stranger])
     ((where, message),) = ask(client, keys.results_key(mine.tile_id, mine.lease_epoch),
                               encode(batch))
@@ -458,7 +471,10 @@ def test_a_batch_with_a_pose_of_another_tile_is_refused_with_its_key(
     assert stranger.pose_key in message.message and f"tile {mine.tile_id}" in message.message
     with any_sessions() as session:
         assert session.scalar(select(func.count()).select_from(PoseRow)) == 0
-        assert session.get(TileRow, mine.tile_id).state == "leased"
+        # The holder's refused batch is an attempt of the tile: queued again with the reason.
+        row = session.get(TileRow, mine.tile_id)
+        assert (row.state, row.attempts) == ("queued", 1)
+        assert stranger.pose_key in row.last_error
 
 
 def test_final_with_half_the_poses_leaves_the_tile_open_and_says_what_is_missing(
@@ -469,7 +485,7 @@ def test_final_with_half_the_poses_leaves_the_tile_open_and_says_what_is_missing
     results = made_up(tile)
     assert len(results) == 6
     key = keys.results_key(tile.tile_id, tile.lease_epoch)
-    ((_, ack),) = ask(client, key, encode(ResultBatch(
+    ((_, ack),) = ask(client, key, encode(ResultBatch(session_key=SESSION_KEY,
         worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
         results=results[:3], final=True)))
     assert isinstance(ack, Ack), ack
@@ -479,7 +495,7 @@ def test_final_with_half_the_poses_leaves_the_tile_open_and_says_what_is_missing
         assert session.get(TileRow, tile.tile_id).state == "leased"
         exploration = session.get(ExplorationRow, exploration_id)
         assert (exploration.status, exploration.poses_done) == ("running", 3)
-    ((_, ack),) = ask(client, key, encode(ResultBatch(
+    ((_, ack),) = ask(client, key, encode(ResultBatch(session_key=SESSION_KEY,
         worker_id="w-1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
         results=results[3:], final=True)))
     assert isinstance(ack, Ack) and (ack.inserted, ack.tile_state, ack.missing) == (

@@ -35,6 +35,8 @@ HELD: list[tuple[float, tuple[float | None, ...], dict[str, float | None] | None
     (0.3, (None, None, None), {"torque_margin_ratio": None, "friction_margin": 0.05}),
 ]
 
+SESSION_KEY = "5e55" * 8  # a worker session's key (any 32 hex digits)
+
 
 def _results(poses: list[Any]) -> list[PoseResult]:
     """The tile's results: HELD for its first poses, the others never touched the object."""
@@ -67,7 +69,8 @@ def stored(session: Session) -> tuple[int, list[PoseResult]]:
     eid = make_exploration(session)
     leased = lease_tiles(session, worker_id="w1", n=4, lease_seconds=60)
     tile = max(leased, key=lambda t: len(t.poses()))  # not a pole's three poses
-    batch = ResultBatch(worker_id="w1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+    batch = ResultBatch(session_key=SESSION_KEY,
+                        worker_id="w1", tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
                         results=_results(tile.poses()))
     received = decode_as(encode(batch), ResultBatch)
     assert isinstance(received, ResultBatch) and received.results == batch.results
