@@ -7,8 +7,9 @@ from __future__ import annotations
 import math
 from datetime import UTC, datetime
 
-from graspscape.shared.specs.results import Outcome
+from graspscape.shared.specs.results import Outcome, nonfinite_fields
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.shared.wire.codec import decode_as, encode
 from graspscape.shared.wire.messages import ObjectRef, ResultBatch, TileLease
 from graspscape.workers.runtime.config import WorkerConfig
 from graspscape.workers.runtime.isolation import SYSTEMATIC_AFTER
@@ -71,3 +72,32 @@ def test_errors_after_a_good_start_stay_per_pose() -> None:
     batch = worker._evaluate_tile(tile, tile.poses())
     assert batch is not None and batch.final and not delivered
     assert sum(r.outcome == Outcome.ERROR for r in batch.results) == len(tile.poses()) - 1
+
+
+def test_a_result_with_a_non_finite_number_is_sent_as_that_pose_s_error() -> None:
+    # A blown-up simulation returns NaN or ∞ somewhere in a result built without validation
+    # (model_copy): the pose goes out as `error` naming the values, the rest as they were.
+    tile = _tile()
+    bad = tile.poses()[1].key()
+    worker, delivered = _worker(lambda pose: False)
+    evaluate = worker._evaluate
+
+    def blown_up(tile, obj, pose, donors=None):  # type: ignore[no-untyped-def]
+        result = evaluate(tile, obj, pose, donors)
+        if pose.key() != bad:
+            return result
+        joints = {**result.grasp.joint_angles, "joint_1": float("inf")}
+        return result.model_copy(update={
+            "effort_max_nm": float("nan"),
+            "grasp": result.grasp.model_copy(update={"joint_angles": joints})})
+
+    worker._evaluate = blown_up  # type: ignore[method-assign]
+    batch = worker._evaluate_tile(tile, tile.poses())
+    assert batch is not None and batch.final and not delivered
+    (error,) = [r for r in batch.results if r.outcome == Outcome.ERROR]
+    assert error.pose_key == bad and not error.viable and error.grasp is None
+    assert error.error == ("ValueError: non-finite result values: effort_max_nm=nan, "
+                           "grasp.joint_angles.joint_1=inf")
+    # Every number of the batch is finite now: it encodes without a `null`, and decodes.
+    assert not nonfinite_fields(batch)
+    assert isinstance(decode_as(encode(batch), ResultBatch), ResultBatch)
