@@ -7,6 +7,8 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from graspscape.shared.specs.numbers import cli_number
+
 if TYPE_CHECKING:
     from graspscape.shared.specs.objects import ObjectSpec
 
@@ -14,9 +16,9 @@ if TYPE_CHECKING:
 def _pose_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--object", default="sphere",
                         help="built-in name, pb:<name>, ycb:<Folder>, or a mesh file path")
-    parser.add_argument("--mass", type=float, help="object mass, kg (mesh files)")
-    parser.add_argument("--friction", type=float, help="object friction coefficient")
-    parser.add_argument("--scale", type=float, help="uniform object scale (default 1)")
+    parser.add_argument("--mass", type=cli_number, help="object mass, kg (mesh files)")
+    parser.add_argument("--friction", type=cli_number, help="object friction coefficient")
+    parser.add_argument("--scale", type=cli_number, help="uniform object scale (default 1)")
     parser.add_argument("--units", choices=["m", "cm", "mm"],
                         help="length unit of a mesh file (default m)")
     parser.add_argument("--gripper", default="robotiq_3f", help="gripper spec name or TOML path")

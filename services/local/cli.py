@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_R
+from graspscape.shared.specs.numbers import cli_number
 
 
 def _explore(args: argparse.Namespace) -> int:
@@ -71,9 +72,9 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
     explore.add_argument(
         "--data-dir", type=Path, help="folder of the database and results (default data)"
     )
-    explore.add_argument("--mass", type=float, help="object mass, kg")
-    explore.add_argument("--friction", type=float, help="object friction coefficient")
-    explore.add_argument("--scale", type=float, help="uniform object scale (default 1)")
+    explore.add_argument("--mass", type=cli_number, help="object mass, kg")
+    explore.add_argument("--friction", type=cli_number, help="object friction coefficient")
+    explore.add_argument("--scale", type=cli_number, help="uniform object scale (default 1)")
     explore.add_argument("--units", choices=["m", "cm", "mm"],
                          help="length unit of a mesh file (default m)")
     explore.add_argument(
@@ -153,8 +154,24 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # one clear line for users instead of a traceback
         if getattr(args, "debug", False):
             raise
-        print(f"graspscape {args.command}: error: {exc}", file=sys.stderr)
+        print(f"graspscape {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
+
+
+def one_line(exc: Exception) -> str:
+    """An error as one line: pydantic's multi-line dump as `field: why` per error (a
+    validator's own message without pydantic's "Value error, "), anything else joined."""
+    from pydantic import ValidationError
+
+    if not isinstance(exc, ValidationError):
+        return " ".join(str(exc).split())
+    parts = []
+    for e in exc.errors(include_url=False):
+        where = ".".join(str(part) for part in e["loc"])
+        why = str(e["msg"]).removeprefix("Value error, ")
+        shown = f" (got {e['input']!r})" if not isinstance(e.get("input"), dict | list) else ""
+        parts.append(f"{where}: {why}{shown}" if where else why)
+    return "; ".join(" ".join(part.split()) for part in parts)
 
 
 if __name__ == "__main__":

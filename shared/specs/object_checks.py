@@ -43,7 +43,7 @@ GAP_FACTOR = 0.5
 _MAX_PIECES = 2000
 
 IssueCode = Literal[
-    "empty", "non_finite", "too_many_faces", "too_small", "too_large", "flat",
+    "empty", "non_finite", "too_many_faces", "degenerate", "too_small", "too_large", "flat",
     "not_watertight", "zero_volume", "mass_missing", "unknown_name",
     "disconnected", "large", "unchecked_name",
 ]
@@ -106,6 +106,24 @@ def mesh_errors(mesh: trimesh.Trimesh, label: str, max_faces: int = MAX_FACES) -
         return [_issue("too_many_faces", f"{label}: {len(mesh.faces)} faces exceed the limit "
                        f"of {max_faces}; simplify it (decimate) below {max_faces} faces")]
     return []
+
+
+def degenerate_error(mesh: trimesh.Trimesh, label: str) -> ObjectIssue | None:
+    """A mesh whose triangles have no area (each one's corners coincide or lie on a line):
+    there is no surface, whatever its vertices span. Named as such; measured by its size it
+    read as "too large" or "flat"."""
+    vertices = np.asarray(mesh.vertices, dtype=float)
+    corners = vertices[np.asarray(mesh.faces)]
+    doubled = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                      corners[:, 2] - corners[:, 0]), axis=1)
+    span = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
+    # Relative to the mesh's span: a micrometre mesh's true triangles are tiny, not zero.
+    if span > 0 and float(doubled.max()) > 1e-12 * span * span:
+        return None
+    return _issue("degenerate", (
+        f"{label}: mesh is degenerate: none of its {len(doubled)} triangles has an area "
+        "(their corners coincide or lie on one line), so it has no surface to grasp; give a "
+        "triangle mesh of a solid"))
 
 
 def size_issues(size_m: float, label: str, spec: ObjectSpec) -> ObjectReport:
@@ -196,6 +214,10 @@ def _check_geometry(
     basic = mesh_errors(mesh, label, max_faces)
     if basic:
         report.errors.extend(basic)
+        return report
+    degenerate = degenerate_error(mesh, label)
+    if degenerate is not None:  # before its size: the size of no surface says nothing
+        report.errors.append(degenerate)
         return report
     # From the raw vertices: merging them first would collapse a micrometre mesh to a point.
     vertices = np.asarray(mesh.vertices, dtype=float)

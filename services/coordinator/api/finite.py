@@ -6,6 +6,10 @@ body is checked here before FastAPI parses it: each non-finite number is refused
 in the validation shape, naming where it is (`["body", "grid", "dtheta"]`). Query and form
 numbers are declared `allow_inf_nan=False` where they are declared.
 
+A number too small for a float (`1e-400`) parses to 0.0 and would pass a bound such as
+`friction ≥ 0` as a value nobody gave: it is refused the same way (`float_underflow`), in JSON
+bodies here and in form fields by `NoUnderflow`.
+
 The 422 handler replaces FastAPI's: the same `{"detail": [...]}`, but a non-finite number
 echoed back in an error (`input`, `ctx`) is written as its JSON-ish token, since
 `JSONResponse` refuses NaN and the default handler answered such a request with a 500.
@@ -24,32 +28,53 @@ from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.routing import APIRoute
+from graspscape.shared.specs.numbers import UNDERFLOW_MESSAGE, underflows
+from pydantic import BeforeValidator
 
 FINITE_MESSAGE = "Input should be a finite number"
+__all__ = ["FINITE_MESSAGE", "UNDERFLOW_MESSAGE", "FiniteJSONRoute", "NoUnderflow", "underflows"]
+
+
+def _refuse_underflow(value: Any) -> Any:
+    if isinstance(value, str) and underflows(value):
+        raise ValueError(UNDERFLOW_MESSAGE)
+    return value
+
+
+# For form and query numbers, which arrive as text: `Annotated[float, NoUnderflow, Form()]`.
+NoUnderflow = BeforeValidator(_refuse_underflow)
 
 
 class _NonFinite:
     """Left in the parsed document where a non-finite number was."""
 
-    __slots__ = ("text",)
+    __slots__ = ("text", "underflow")
 
-    def __init__(self, text: str) -> None:
-        self.text = text
+    def __init__(self, text: str, underflow: bool = False) -> None:
+        self.text, self.underflow = text, underflow
 
 
 def non_finite_locations(body: bytes) -> list[tuple[tuple[str | int, ...], str]]:
     """(path, token) of every non-finite number in a JSON document; [] if none, or if the
     document is not JSON at all (FastAPI says so itself)."""
+    return [(path, marker.text) for path, marker in _unusable_numbers(body)
+            if not marker.underflow]
+
+
+def _unusable_numbers(body: bytes) -> list[tuple[tuple[str | int, ...], _NonFinite]]:
+    """(path, marker) of every non-finite or underflowing number in a JSON document."""
     found: list[_NonFinite] = []
 
-    def mark(text: str) -> _NonFinite:
-        marker = _NonFinite(text)
+    def mark(text: str, underflow: bool = False) -> _NonFinite:
+        marker = _NonFinite(text, underflow)
         found.append(marker)
         return marker
 
     def number(text: str) -> float | _NonFinite:
         value = float(text)
-        return value if math.isfinite(value) else mark(text)
+        if not math.isfinite(value):
+            return mark(text)
+        return mark(text, underflow=True) if underflows(text) else value
 
     try:
         document = json.loads(body, parse_constant=mark, parse_float=number)
@@ -57,12 +82,12 @@ def non_finite_locations(body: bytes) -> list[tuple[tuple[str | int, ...], str]]
         return []
     if not found:
         return []
-    out: list[tuple[tuple[str | int, ...], str]] = []
+    out: list[tuple[tuple[str | int, ...], _NonFinite]] = []
     stack: list[tuple[tuple[str | int, ...], Any]] = [((), document)]
     while stack:
         path, value = stack.pop()
         if isinstance(value, _NonFinite):
-            out.append((path, value.text))
+            out.append((path, value))
         elif isinstance(value, dict):
             stack.extend(((*path, k), v) for k, v in reversed(value.items()))
         elif isinstance(value, list):
@@ -82,7 +107,8 @@ def _is_json(content_type: str | None) -> bool:
 
 
 class FiniteJSONRoute(APIRoute):
-    """An APIRoute that refuses a JSON body holding NaN or ±Infinity with a 422."""
+    """An APIRoute that refuses a JSON body holding NaN, ±Infinity or an underflowing number
+    with a 422."""
 
     def get_route_handler(self) -> Callable[[Request], Coroutine[Any, Any, Response]]:
         handler = super().get_route_handler()
@@ -92,15 +118,16 @@ class FiniteJSONRoute(APIRoute):
                 request.headers.get("content-type")
             ):
                 body = await request.body()  # cached: FastAPI reads the same bytes next
-                bad = non_finite_locations(body) if body else []
+                bad = _unusable_numbers(body) if body else []
                 if bad:
-                    raise RequestValidationError(
-                        [
-                            {"type": "finite_number", "loc": ("body", *path),
-                             "msg": FINITE_MESSAGE, "input": token}
-                            for path, token in bad
-                        ]
-                    )
+                    raise RequestValidationError([
+                        {"type": "float_underflow", "loc": ("body", *path),
+                         "msg": UNDERFLOW_MESSAGE, "input": marker.text}
+                        if marker.underflow else
+                        {"type": "finite_number", "loc": ("body", *path),
+                         "msg": FINITE_MESSAGE, "input": marker.text}
+                        for path, marker in bad
+                    ])
             return await handler(request)
 
         return finite_only

@@ -8,7 +8,11 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep, SettingsDep
-from graspscape.services.coordinator.api.finite import FiniteJSONRoute
+from graspscape.services.coordinator.api.finite import (
+    FiniteJSONRoute,
+    NoUnderflow,
+    underflows,
+)
 from graspscape.services.coordinator.api.pages import Page
 from graspscape.services.coordinator.api.responses import NOT_FOUND, UNAUTHORIZED, error
 from graspscape.services.coordinator.errors import InvalidInput, PayloadTooLarge
@@ -37,7 +41,8 @@ def _inertia(text: str | None) -> tuple[float, float, float] | None:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+    if (len(values) != 3 or not all(math.isfinite(v) for v in values)
+            or any(underflows(v) for v in text.split(","))):
         raise InvalidInput(
             "inertia_diag must be three finite comma-separated numbers, kg·m²",
             loc=("body", "inertia_diag"),
@@ -73,12 +78,15 @@ def create_object(
         str | None,
         Form(max_length=300, description="built-in, 'pb:…', 'ycb:…' or 'shared:<file>'"),
     ] = None,
-    mass_kg: Annotated[float | None, Form(allow_inf_nan=False, description="kg, (0, 50]")] = None,
+    mass_kg: Annotated[float | None, NoUnderflow,
+                       Form(allow_inf_nan=False, description="kg, (0, 50]")] = None,
     friction: Annotated[
-        float | None, Form(allow_inf_nan=False, description="lateral friction, [0, 5]")
+        float | None, NoUnderflow,
+        Form(allow_inf_nan=False, description="lateral friction, [0, 5]")
     ] = None,
     scale: Annotated[
-        float | None, Form(allow_inf_nan=False, description="uniform mesh scale, (0, 100]")
+        float | None, NoUnderflow,
+        Form(allow_inf_nan=False, description="uniform mesh scale, (0, 100]")
     ] = None,
     inertia_diag: Annotated[
         str | None, Form(max_length=200, description="'Ixx,Iyy,Izz' in kg·m²")

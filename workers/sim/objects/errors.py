@@ -56,6 +56,7 @@ _BY_CODE: dict[str, type[ObjectError]] = {
     "empty": EmptyMesh,
     "non_finite": NonFiniteVertices,
     "too_many_faces": TooManyFaces,
+    "degenerate": ZeroVolume,
     "too_small": WrongSize,
     "too_large": WrongSize,
     "flat": ZeroVolume,

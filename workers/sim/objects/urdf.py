@@ -47,6 +47,16 @@ def _geometry(link: ET.Element, tag: str, folder: Path) -> tuple[Path, np.ndarra
     return path, _origin_transform(node.find("origin")) @ scale
 
 
+def _inside(mesh: Path, urdf: Path, label: str) -> None:
+    """A URDF's meshes are files of its own folder: a path leading out of it (`..`, an
+    absolute path, a link) is refused, as an upload of a URDF is, rather than followed."""
+    folder = urdf.parent.resolve()
+    if not mesh.resolve().is_relative_to(folder):
+        raise UnreadableMesh(
+            f"{label}: the URDF's mesh {mesh} points outside its folder {folder}; put the "
+            "mesh files beside the URDF")
+
+
 def read_urdf(path: Path, label: str) -> UrdfObject:
     """Mass, friction and mesh geometry of the URDF's first link."""
     if not path.is_file():
@@ -64,7 +74,10 @@ def read_urdf(path: Path, label: str) -> UrdfObject:
             f"{label}: cannot read {path}: {exc!r}; give a URDF whose first link has an "
             "<inertial><mass> and a <collision> mesh"
         ) from exc
+    _inside(collision[0], path, label)
     visual = _geometry(link, "visual", path.parent)
+    if visual is not None:
+        _inside(visual[0], path, label)
     if visual is not None and not visual[0].is_file():
         visual = None  # some YCB folders ship without their textured mesh: show the hulls
     return UrdfObject(path, mass, friction, collision, visual)

@@ -339,6 +339,31 @@ def test_non_finite_form_numbers_are_422(refusals: RefusalApi, field: str, value
     assert error["loc"] == ["body", field] and "finite" in error["msg"]
 
 
+@pytest.mark.parametrize(("field", "value"), [("friction", "1e-400"), ("mass_kg", "-1e-400"),
+                                              ("scale", "0.0000000001e-320")])
+def test_form_numbers_that_underflow_to_zero_are_422(refusals: RefusalApi, field: str,
+                                                     value: str) -> None:
+    # float("1e-400") is 0.0, which friction ≥ 0 would take (a 201 before).
+    response = refusals.client.post("/objects", data={"name": "sphere", field: value})
+    assert response.status_code == 422, response.text
+    (error,) = response.json()["detail"]
+    assert error["loc"] == ["body", field] and "too small for a float" in error["msg"]
+    zero = refusals.client.post("/objects", data={"name": "sphere", "friction": "0e-400"})
+    assert zero.status_code in (200, 201), zero.text  # a zero written so is zero
+
+
+def test_a_number_that_underflows_in_a_body_is_422(refusals: RefusalApi) -> None:
+    before = refusals.explorations()
+    body = b'{"object_id": OBJ, "grid": {"r_min": 1e-400}}'
+    response = refusals.client.post(
+        "/explorations", content=body.replace(b"OBJ", str(refusals.object_id).encode()),
+        headers={"content-type": "application/json"})
+    assert response.status_code == 422, response.text
+    (error,) = response.json()["detail"]
+    assert error["loc"] == ["body", "grid", "r_min"] and error["type"] == "float_underflow"
+    assert error["input"] == "1e-400" and refusals.explorations() == before
+
+
 @pytest.mark.parametrize(
     ("path", "params"),
     [
