@@ -105,7 +105,7 @@ class Worker:
 
     def __init__(self, endpoint: str, procs: int, name: str, cache_dir: Path,
                  instant: bool = False, tiles_per_request: int = 1,
-                 log_level: str = "info") -> None:
+                 log_level: str = "info", pose_s: float = 0.0) -> None:
         self.log_path = cache_dir.parent / f"worker-{name}.log"
         self.log = open(self.log_path, "wb")  # noqa: SIM115
         args = [sys.executable, "-m", "graspscape.services.local.cli", "worker", "--connect",
@@ -114,6 +114,8 @@ class Worker:
                 "--log-level", log_level]
         if instant:
             args.append("--instant")
+        if pose_s:
+            args += ["--instant-pose-s", str(pose_s)]
         if tiles_per_request != 1:
             args += ["--tiles-per-request", str(tiles_per_request)]
         self.process = subprocess.Popen(args, cwd=REPO, stdout=self.log,
