@@ -7,6 +7,7 @@ stored outcome of the poisoned pose and the coordinator's log lines per refused 
 With the worker's check the pose is stored as `error` and the exploration ends `done`;
 without it (`checked=False`, a worker of before the check) the coordinator refuses the batch,
 counts each refusal as an attempt and fails the tile at max_attempts: `incomplete`.
+A second exploration queued behind the first must be leased and finish as well.
 `tests/faults/test_nan_result.py` asserts on it, `benchmarks/bench_nan_result.py` records it.
 """
 
@@ -37,13 +38,14 @@ def _sample(sessions: Any, exploration_id: int, started: float) -> dict[str, Any
                 "tiles_failed": failed}
 
 
-def nan_run(work: Path, *, checked: bool = True, every_s: float = 2.0, pose_s: float = 0.05,
+def nan_run(work: Path, *, checked: bool = True, every_s: float = 1.0, pose_s: float = 0.15,
             timeout_s: float = 400) -> dict[str, Any]:
     url = f"sqlite:///{work / 'coordinator.db'}"
     db.upgrade(url)
     engine = db.make_engine(url)
     sessions = db.make_sessionmaker(engine)
     exploration_id = submit(sessions, 60.0, 3)
+    second_id = submit(sessions, 60.0, 3)  # queued behind it: must be leased and finish too
     with sessions() as session:  # the poisoned pose: the first of the exploration's 3rd tile
         cells, r_levels, attitudes = session.execute(
             select(TileRow.cells, TileRow.r_levels, TileRow.attitudes)
@@ -58,7 +60,8 @@ def nan_run(work: Path, *, checked: bool = True, every_s: float = 2.0, pose_s: f
     coordinator = Child(coordinator_args(url, free_port(), listen=[endpoint]),
                         work / "coordinator.log", env)
     worker = Child([PYTHON, "-m", "tests.faults.nan_worker", endpoint, "nan", str(work / "cache"),
-                    str(pose_s), poisoned, *([] if checked else ["--unchecked"])],
+                    str(pose_s), f"{exploration_id}:{poisoned}",
+                    *([] if checked else ["--unchecked"])],
                    work / "worker.log")
     timeline: list[dict[str, Any]] = []
     try:
@@ -70,11 +73,13 @@ def nan_run(work: Path, *, checked: bool = True, every_s: float = 2.0, pose_s: f
         started = time.monotonic()
         while True:
             timeline.append(_sample(sessions, exploration_id, started))
-            if timeline[-1]["status"] not in ("queued", "running"):
+            timeline[-1]["second"] = _sample(sessions, second_id, started)["status"]
+            if {timeline[-1]["status"], timeline[-1]["second"]}.isdisjoint(
+                    ("queued", "running")):
                 break
             assert time.monotonic() - started < timeout_s, timeline[-1]
             time.sleep(every_s)
-        ended_s = time.monotonic() - started
+        ended_s = next(s["t_s"] for s in timeline if s["status"] not in ("queued", "running"))
         with sessions() as session:
             leases = dict(session.execute(
                 select(TileRow.index, TileRow.lease_epoch)
@@ -85,6 +90,7 @@ def nan_run(work: Path, *, checked: bool = True, every_s: float = 2.0, pose_s: f
             failed = list(session.scalars(select(TileRow.last_error).where(
                 TileRow.exploration_id == exploration_id, TileRow.state == "failed")))
         result_tally = tally(sessions, exploration_id)
+        second = tally(sessions, second_id)
     finally:
         worker.stop(30)
         coordinator.stop(30)
@@ -98,6 +104,7 @@ def nan_run(work: Path, *, checked: bool = True, every_s: float = 2.0, pose_s: f
         "poisoned_outcome": None if pose is None else {"outcome": pose[0], "error": pose[1],
                                                        "effort_max_nm": pose[2]},
         "failed_tiles_reasons": failed, "tally": result_tally.__dict__,
+        "second_exploration": second.__dict__, "second_complete": second.complete,
         "refused_batches_in_log": len(refused),
         "coordinator_log_lines": len([line for line in log.splitlines() if line.strip()]),
         "coordinator_tracebacks": log.count("Traceback"),

@@ -3,7 +3,8 @@ evaluation of the given poses returns a NaN effort, as a blown-up simulation doe
 `--unchecked` the loop's finite check is taken out, as in a worker of before it: the NaN
 goes out in the batch (as `null`) and only the coordinator can stop the loop.
 
-    python -m tests.faults.nan_worker ENDPOINT NAME CACHE_DIR POSE_S KEY [KEY ...] [--unchecked]
+    python -m tests.faults.nan_worker ENDPOINT NAME CACHE_DIR POSE_S EXPLORATION:KEY ...
+        [--unchecked]
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ class BlownUp(WorkerProcess):
 
     def _evaluate(self, tile, obj, pose, donors=None):  # type: ignore[no-untyped-def]
         result = super()._evaluate(tile, obj, pose, donors)
-        if pose.key() not in self.poisoned:
+        if f"{tile.exploration_id}:{pose.key()}" not in self.poisoned:
             return result
         logging.getLogger("graspscape.worker").warning("pose %s: NaN injected", pose.key())
         return result.model_copy(update={"effort_max_nm": float("nan")})  # no validation

@@ -27,6 +27,7 @@ def test_a_nan_in_one_pose_is_stored_as_that_pose_s_error(tmp_path: Path) -> Non
     assert tally["missing"] == tally["foreign"] == 0
     assert set(result["leases_per_tile"].values()) == {1}  # nothing went round
     assert result["refused_batches_in_log"] == 0 and result["coordinator_tracebacks"] == 0
+    assert result["second_complete"], result["second_exploration"]
 
 
 def test_a_nan_sent_by_a_worker_without_the_check_fails_its_tile_not_the_run(
@@ -48,3 +49,4 @@ def test_a_nan_sent_by_a_worker_without_the_check_fails_its_tile_not_the_run(
     tally = result["tally"]  # every other pose stored once
     assert tally["foreign"] == 0 and tally["stored_rows"] == tally["unique_keys"]
     assert tally["missing"] == 3  # the failed tile's poses
+    assert result["second_complete"], result["second_exploration"]
