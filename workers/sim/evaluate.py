@@ -24,7 +24,6 @@ from graspscape.shared.specs.gripper import GripperSpec, load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
-    GraspConfiguration,
     Outcome,
     PhaseTimes,
     PoseResult,
@@ -40,8 +39,8 @@ from graspscape.workers.sim.bullet import (
     saved_state,
 )
 from graspscape.workers.sim.configuration_inference import DonorPool, inferred
-from graspscape.workers.sim.geometry import quat_from_matrix
-from graspscape.workers.sim.grasp_metrics import scene_metrics
+from graspscape.workers.sim.engine import make_evaluator
+from graspscape.workers.sim.grasp_record import grasp_fields
 from graspscape.workers.sim.gripper.hand import Hand
 from graspscape.workers.sim.metric import mu_s
 from graspscape.workers.sim.objects import (
@@ -55,7 +54,6 @@ from graspscape.workers.sim.render import render_grasp
 from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, run_tests
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
-from graspscape.workers.sim.signature import build_signature
 from graspscape.workers.sim.start_pose import StartPose, place_hand, start_pose
 from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
 
@@ -168,24 +166,7 @@ class Evaluator:
 
         hand, scene = self.scene.hand, self.scene
         grasp = capture_grasp(scene) if keep_grasp else None
-        obj_pos, obj_rot = scene.object_pose()
-        base_pos, base_rot = hand.frame_pose()
-        rel_rot = obj_rot.T @ base_rot
-        raw = [(hand.link_names[c.link_index_a],
-                tuple((obj_rot.T @ (np.array(c.position_on_b) - obj_pos)).tolist()),
-                c.normal_force) for c in scene.contacts()]
-        angles = hand.joint_angles()
-        result["grasp"] = GraspConfiguration(
-            base_position=tuple((obj_rot.T @ (base_pos - obj_pos)).tolist()),
-            base_orientation=tuple(quat_from_matrix(rel_rot)),
-            joint_angles=angles,
-        )
-        result["signature"] = build_signature(raw, angles)
-        counts: dict[str, int] = {}
-        for link, _, _ in raw:
-            counts[link] = counts.get(link, 0) + 1
-        result["contacts_per_link"] = counts
-        result.update(scene_metrics(scene, self.length, self.prepared.mass_kg))  # μg, μf, μm
+        result.update(grasp_fields(scene, self.length, self.prepared.mass_kg))
 
         if picture is not None:
             render_grasp(self.client, hand.body, scene.object_body, picture)
@@ -330,7 +311,7 @@ def default_cache_dir() -> Path:
     return Path(os.environ.get("GRASPSCAPE_CACHE_DIR", Path.home() / ".cache" / "graspscape"))
 
 
-_EVALUATORS: dict[tuple[str, str, str], Evaluator] = {}
+_EVALUATORS: dict[tuple[str, str, str], Evaluator] = {}  # or MjEvaluator (engine.py)
 
 
 def _evaluator(obj: ObjectSpec, gripper: GripperSpec | str, settings: SimSettings | None,
@@ -342,7 +323,7 @@ def _evaluator(obj: ObjectSpec, gripper: GripperSpec | str, settings: SimSetting
     evaluator = _EVALUATORS.get(key)
     if evaluator is None:
         prepared = prepare_object(obj, cache / "objects")
-        evaluator = Evaluator(prepared, spec, settings, work_dir=cache)
+        evaluator = make_evaluator(prepared, spec, settings, work_dir=cache)
         _EVALUATORS[key] = evaluator
     return evaluator
 
