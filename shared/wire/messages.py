@@ -17,7 +17,7 @@ from graspscape.shared.specs.exploration import ConfigurationMatch
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose, tile_poses
 from graspscape.shared.specs.results import PoseResult
-from graspscape.shared.specs.sim import SimSettings
+from graspscape.shared.specs.sim import EngineName, SimSettings
 from graspscape.shared.wire.keys import WORKER_ID_PATTERN
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -47,6 +47,10 @@ class LeaseRequest(_Message):
     # Tiles the worker still works on. Any other tile leased to this worker id was lost on
     # the way (a lease reply that never arrived) and goes back to the queue at once.
     holding: list[Id] = Field(default_factory=list, max_length=64)
+    # The physics engines it runs (SimSettings.engine); it is leased tiles of those only. A
+    # worker that does not say runs pybullet alone, as every worker did before MuJoCo.
+    engines: list[EngineName] = Field(default_factory=lambda: ["pybullet"], min_length=1,
+                                      max_length=8)
 
 
 class ObjectRef(BaseModel):

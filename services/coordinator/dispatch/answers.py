@@ -49,7 +49,8 @@ def lease_for(session: Session, request: LeaseRequest, *, n: int, lease_seconds:
     """Release what the worker does not hold any more, then lease up to n tiles to it."""
     lost = release_unheld(session, worker_id=request.worker_id, holding=request.holding)
     tiles = lease_tiles(session, worker_id=request.worker_id, n=n, lease_seconds=lease_seconds,
-                        host=request.host, capacity=request.capacity)
+                        host=request.host, capacity=request.capacity,
+                        engines=request.engines)
     if tiles and session.get_bind().dialect.name == "postgresql":
         # The lease is committed; the contexts are only read, outside a transaction: one
         # round trip where a transaction of their own took three (BEGIN, the read, and the

@@ -57,15 +57,17 @@ def lease_tiles(
     host: str = "",
     capacity: int = 1,
     now: datetime | None = None,
+    engines: Sequence[str] = ("pybullet",),
 ) -> list[LeasedTile]:
-    """Lease up to n queued tiles to a worker, oldest exploration first."""
+    """Lease up to n queued tiles to a worker, oldest exploration first, of explorations
+    whose physics engine the worker runs (`engines`)."""
     if n < 1:
         return []
     now = now or utcnow()
     session.flush()  # what the session holds goes first, as autoflush would do it
     leased = tiles.lease(session, worker_id=worker_id, n=n,
                          expires=now + timedelta(seconds=lease_seconds), now=now,
-                         skip_locked=is_postgres(session))
+                         skip_locked=is_postgres(session), engines=engines)
     exploration_ids = sorted({t.exploration_id for t in leased})
     if exploration_ids:
         session.connection().execute(_START_EXPLORATIONS, {"ids": exploration_ids, "now": now})

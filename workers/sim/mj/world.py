@@ -46,6 +46,7 @@ class World:
     object_dofs: slice
     palm_qpos: slice
     fixture: int  # the weld equality that holds the object until release
+    grip_weld: int  # the weld of the object to the palm (calibration only)
     joint_ids: dict[str, int]  # hand joint name -> joint id
     actuator_of: dict[str, int]  # finger / spread joint name -> its actuator id
     link_names: dict[int, str]  # body id -> link name ("palm" for the palm)
@@ -67,7 +68,12 @@ def _add_object(spec: mujoco.MjSpec, prepared: PreparedObject, offset: np.ndarra
                       contype=OBJECT_GROUP, conaffinity=HAND_GROUP,
                       friction=[friction, 0.0, 0.0], solref=solref, condim=3)
     spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=OBJECT, objtype=mujoco.mjtObj.mjOBJ_BODY,
-                      name="fixture", data=[0.0] * 10 + [1.0, 0.0])  # anchor 0, torquescale 1
+                      name="fixture", data=[0.0] * 10 + [1.0, 0.0],  # anchor 0, torquescale 1
+                      solref=solref)
+    # The estimator's anchor (mj/calibration.py): the object welded to the palm, off until used.
+    spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=PALM, name2=OBJECT,
+                      objtype=mujoco.mjtObj.mjOBJ_BODY, name="grip_weld", active=False,
+                      data=[0.0] * 10 + [1.0, 0.0], solref=solref)
 
 
 def build_world(prepared: PreparedObject, hand: HandModel, dt: float, offset: np.ndarray,
@@ -139,6 +145,7 @@ def _index(model: mujoco.MjModel) -> World:
     return World(model=model, palm_body=palm, object_body=obj, palm_dofs=slice(da, da + 6),
                  object_qpos=slice(qo, qo + 7), object_dofs=slice(do, do + 6),
                  palm_qpos=slice(qa, qa + 7), fixture=model.equality("fixture").id,
+                 grip_weld=model.equality("grip_weld").id,
                  joint_ids=joint_ids, actuator_of=actuator_of, link_names=link_names,
                  link_index=link_index, geom_link=geom_link)
 
