@@ -352,7 +352,11 @@ def render_pose(pose: Pose, path: Path, *, obj: ObjectSpec,
     where no grasp formed)."""
     evaluator = _evaluator(obj, gripper, settings, cache_dir)
     result = evaluator.evaluate(pose, picture=path)
-    if not path.exists():
+    if not path.exists() and isinstance(evaluator, Evaluator):
         render_grasp(evaluator.client, evaluator.scene.hand.body, evaluator.scene.object_body,
                      path)
+    elif not path.exists():
+        from graspscape.workers.sim.mj.picture import draw_scene
+
+        draw_scene(evaluator, path)
     return path, result

@@ -31,7 +31,7 @@ def mj_sphere(sim_cache, object_cache) -> MjEvaluator:
 
 
 def test_engine_names_are_the_settings_choices() -> None:
-    assert ENGINE_NAMES == typing.get_args(EngineName)
+    assert typing.get_args(EngineName) == ENGINE_NAMES
     assert SimSettings().engine == "pybullet"
     with pytest.raises(ValidationError):
         SimSettings(engine="physx")

@@ -46,7 +46,7 @@ class MjEvaluator:
         if settings.policy_name != "baseline":
             raise ValueError("the MuJoCo engine runs the baseline policy only "
                              f"(asked for {settings.policy_name!r})")
-        self.prepared, self.gripper = prepared, gripper
+        self.prepared, self.gripper, self.work_dir = prepared, gripper, work_dir
         self.policy = get_policy(settings.policy_name)
         k = settings.physics.mujoco_substeps
         self.substeps = k
