@@ -251,13 +251,7 @@ class Evaluator:
                            contact_free_state=self.pristine, target_drive=path.drive,
                            drive_quat=scene.drive_to_quat)
 
-        def slipped() -> bool:
-            pos, rot = hand.frame_pose()
-            o_pos, o_rot = scene.object_pose()
-            moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
-            turned = rotation_angle((rot.T @ o_rot) @ rel_rot0.T)
-            return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
-
+        slipped = slip_check(scene, spec, rel_pos0, rel_rot0)
         effort = 0.0
         held = scene.in_contact()  # a dropped object has fallen ~5 cm by now, off the hand
         # States at the sampled instants; they are probed only once the grasp has held to the
@@ -266,7 +260,6 @@ class Evaluator:
         # solver's warm-started contacts, which a restored state lacks (restore_clean), and
         # its response differs from a rollout's by up to 0.08 m/s of ~0.3.
         saved: dict[int, int] = {}
-        window = metric.window_steps
         fingers = hand.finger_joints
         ran = 0
         with ExitStack() as kept:  # the instants' states are freed however this ends
@@ -285,19 +278,26 @@ class Evaluator:
             if held and (slipped() or not scene.in_contact()):
                 held = False
             phases.trajectory_s += time.perf_counter() - t0
-            qualities: list[float] = []
             tp = time.perf_counter()
-            central = metric.differences == "central"
-            # Each probe restores its own instant cleanly first, and nothing reads the
-            # simulation after the last one (the next evaluation restores the pristine state
-            # and drops every contact; the robustness tests restore the grasp cleanly): no
-            # probe needs to put its instant back.
-            for step, state in sorted(saved.items()) if held else ():
-                qualities.append(probe_instant(ctx, step, dt, metric, self.length, state=state,
-                                               restore=False))
-                phases.sensitivity_steps += (12 if central else 7) * window
+            qualities = self._probes(ctx, saved if held else {}, phases)
         phases.sensitivity_s += time.perf_counter() - tp
         return held, qualities, effort
+
+    def _probes(self, ctx: ProbeContext, saved: dict[int, int],
+                phases: PhaseTimes) -> list[float]:
+        """The μs probes at the saved instants (step -> saved state), in step order."""
+        metric = self.settings.metric
+        central = metric.differences == "central"
+        qualities: list[float] = []
+        # Each probe restores its own instant cleanly first, and nothing reads the
+        # simulation after the last one (the next evaluation restores the pristine state
+        # and drops every contact; the robustness tests restore the grasp cleanly): no
+        # probe needs to put its instant back.
+        for step, state in sorted(saved.items()):
+            qualities.append(probe_instant(ctx, step, self.scene.dt, metric, self.length,
+                                           state=state, restore=False))
+            phases.sensitivity_steps += (12 if central else 7) * metric.window_steps
+        return qualities
 
     def _finish(self, started: float, outcome: Outcome, result: dict) -> PoseResult:
         result.setdefault("mu_s", 0.0)
@@ -305,6 +305,22 @@ class Evaluator:
         result["outcome"] = outcome
         result["eval_time_s"] = time.perf_counter() - started
         return PoseResult(**result)
+
+
+def slip_check(scene, spec, rel_pos0: np.ndarray, rel_rot0: np.ndarray):
+    """A function telling whether the object has slipped in the hand: moved more than the
+    spec's slip distance or turned more than its slip angle from where it rested at the start
+    (rel_pos0, rel_rot0: its pose in the hand's frame then). Either engine's scene."""
+    hand = scene.hand
+
+    def slipped() -> bool:
+        pos, rot = hand.frame_pose()
+        o_pos, o_rot = scene.object_pose()
+        moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
+        turned = rotation_angle((rot.T @ o_rot) @ rel_rot0.T)
+        return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
+
+    return slipped
 
 
 def default_cache_dir() -> Path:

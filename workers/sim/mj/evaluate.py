@@ -21,6 +21,7 @@ from graspscape.shared.specs.gripper import AnyGripperSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import Outcome, PhaseTimes, PoseResult
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim.evaluate import slip_check
 from graspscape.workers.sim.grasp_record import grasp_fields
 from graspscape.workers.sim.gripper.model import hand_model
 from graspscape.workers.sim.metric import mu_s
@@ -31,7 +32,7 @@ from graspscape.workers.sim.mj.world import build_world
 from graspscape.workers.sim.objects import PreparedObject
 from graspscape.workers.sim.policies import get_policy
 from graspscape.workers.sim.start_pose import StartPose, start_pose
-from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
+from graspscape.workers.sim.trajectory import ReferencePath
 
 PARK_HEIGHT_M = 2.0
 
@@ -151,14 +152,7 @@ class MjEvaluator:
         n_steps = max(1, round(spec.duration_s / scene.dt))
         instants = {min(n_steps - 1, int((k + 0.5) * n_steps / metric.instants))
                     for k in range(metric.instants)}
-
-        def slipped() -> bool:
-            pos, rot = hand.frame_pose()
-            o_pos, o_rot = scene.object_pose()
-            moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
-            turned = rotation_angle((rot.T @ o_rot) @ rel_rot0.T)
-            return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
-
+        slipped = slip_check(scene, spec, rel_pos0, rel_rot0)
         effort, held, ran = 0.0, scene.in_contact(), 0
         saved: dict[int, mujoco.MjData] = {}
         check = 10 * self.substeps
