@@ -11,6 +11,7 @@ from graspscape.shared.specs.gripper import load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import Outcome
+from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import ENGINE_NAMES, EngineName, SimSettings
 from graspscape.workers.sim.engine import available_engines, make_evaluator
 from graspscape.workers.sim.metric import mu_s
@@ -85,3 +86,23 @@ def test_urdf_grippers_grasp_the_sphere_in_mujoco(gripper, sim_cache, object_cac
     results = [evaluator.evaluate(Pose(theta=math.pi / 2, phi=phi, r=0.01, roll=roll))
                for phi in (0.0, 2.0) for roll in (0.0, math.pi / 2)]
     assert any(r.outcome is Outcome.HELD for r in results), [r.outcome for r in results]
+
+
+@pytest.mark.slow
+def test_mujoco_measures_the_torque_and_friction_margins(sim_cache, object_cache) -> None:
+    prepared = prepare_object(ObjectSpec(name="sphere"), object_cache)
+    settings = SimSettings(engine="mujoco", robustness=RobustnessSettings(
+        tests=("torque_margin", "friction_margin")))
+    evaluator = make_evaluator(prepared, load_gripper("robotiq_3f"), settings,
+                               work_dir=sim_cache)
+    first = evaluator.evaluate(FROM_SIDE)
+    assert first.outcome is Outcome.HELD and first.robustness is not None
+    effort = load_gripper("robotiq_3f").closing_effort
+    tau = first.robustness.torque_margin_nm
+    assert tau is not None and 0.0 < tau < effort
+    mu = first.robustness.friction_margin
+    assert mu is not None and 0.0 < mu < prepared.friction
+    assert first.robustness.gravity_test_share is None  # not built for MuJoCo
+    # The trials leave nothing behind: the next evaluation is the same.
+    again = evaluator.evaluate(FROM_SIDE)
+    assert again.robustness == first.robustness and again.mu_s == first.mu_s

@@ -6,8 +6,9 @@ the probes' rollouts (mj/probes.py).
 
 MuJoCo steps `physics.mujoco_substeps` times per pybullet step: the step counts a policy or a
 probe window is given (check_every_steps, window_steps) are scaled by it, so each lasts as
-long as in pybullet. The robustness tests and rendering through MuJoCo are not built: a
-picture is drawn by pybullet's renderer from the MuJoCo grasp's poses (mj/picture.py).
+long as in pybullet. Of the robustness tests the torque and friction margins run
+(mj/robustness.py); rendering through MuJoCo is not built: a picture is drawn by pybullet's
+renderer from the MuJoCo grasp's poses (mj/picture.py).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from graspscape.workers.sim.gripper.model import hand_model
 from graspscape.workers.sim.metric import mu_s
 from graspscape.workers.sim.mj.hand import MjHand
 from graspscape.workers.sim.mj.probes import probe_state
+from graspscape.workers.sim.mj.robustness import capture, run_tests
 from graspscape.workers.sim.mj.scene import MjScene
 from graspscape.workers.sim.mj.world import build_world
 from graspscape.workers.sim.objects import PreparedObject
@@ -101,8 +103,8 @@ class MjEvaluator:
         return start_pose(None, self.scene, self.prepared.mesh, pose, self.settings.placement)
 
     def evaluate(self, pose: Pose, *, picture: Path | None = None, **_: object) -> PoseResult:
-        """Simulates one pose (as Evaluator.evaluate; no donors, no robustness tests). With
-        `picture`, a PNG of the synthesized grasp is written there."""
+        """Simulates one pose (as Evaluator.evaluate; no donors; of the robustness tests the
+        settings choose, the margins). With `picture`, a PNG of the synthesized grasp."""
         started = time.perf_counter()
         phases = PhaseTimes()
         self._reset()
@@ -122,11 +124,14 @@ class MjEvaluator:
             from graspscape.workers.sim.mj.picture import draw_scene
 
             draw_scene(self, picture)
+        grasp = capture(self) if self.settings.robustness.tests else None
         held, qualities, effort = self._run_trajectory(phases)
         result["effort_max_nm"] = effort
         if held:
             result["mu_s"] = mu_s(qualities)
             result["viable"] = True
+            if grasp is not None:
+                result["robustness"] = run_tests(self, grasp, self.settings.robustness)
         return self._finish(started, Outcome.HELD if held else Outcome.DROPPED, result)
 
     def _release(self) -> tuple[np.ndarray, np.ndarray, int]:
@@ -141,7 +146,8 @@ class MjEvaluator:
             scene.step()
         return start_pos, start_rot, settle_steps
 
-    def _run_trajectory(self, phases: PhaseTimes) -> tuple[bool, list[float], float]:
+    def _run_trajectory(self, phases: PhaseTimes, *, probes: bool = True,
+                        ) -> tuple[bool, list[float], float]:
         scene, hand = self.scene, self.scene.hand
         spec, metric = self.settings.trajectory, self.settings.metric
         t0 = time.perf_counter()
@@ -157,7 +163,7 @@ class MjEvaluator:
         saved: dict[int, mujoco.MjData] = {}
         check = 10 * self.substeps
         for step in range(n_steps if held else 0):
-            if step in instants:
+            if probes and step in instants:
                 saved[step] = copy = mujoco.MjData(self.world.model)
                 mujoco.mj_copyData(copy, self.world.model, self.data)
             scene.drive_to(*path.pose(step + 1))

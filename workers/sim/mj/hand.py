@@ -92,6 +92,9 @@ class MjHand(Hand):
 
     def _command(self, joint: int, mode: int, target: float, force: float) -> None:
         self.commands[joint] = (mode, float(target), float(force))
+        self._apply(joint, mode, target, force)
+
+    def _apply(self, joint: int, mode: int, target: float, force: float) -> None:
         act = self._act.get(joint)
         if act is None:
             return
@@ -117,14 +120,14 @@ class MjHand(Hand):
         self._command(joint, VELOCITY, target, force)
 
     def reissue(self, effort: float | None = None) -> None:
-        """The model holds the commands (they survive a data copy); `effort` rescales the
-        finger joints' caps as Hand.reissue does."""
-        if effort is None:
-            return
-        scale = effort / self.effort
+        """Applies the recorded commands again (the model holds them, but a restored mjData
+        copy holds the controls of its own time, and an earlier `effort` may have scaled
+        them); with `effort`, every finger joint's force is scaled by effort / the closing
+        effort, as Hand.reissue does. The record itself is not changed."""
+        scale = 1.0 if effort is None else effort / self.effort
         fingers = set(self.finger_joints)
-        for joint, (mode, target, force) in list(self.commands.items()):
-            self._command(joint, mode, target, force * scale if joint in fingers else force)
+        for joint, (mode, target, force) in self.commands.items():
+            self._apply(joint, mode, target, force * scale if joint in fingers else force)
 
     def finger_angles(self, finger: FingerJoints) -> list[float]:
         return [float(self.data.qpos[self._qpos[j]]) for j in finger.joints]
