@@ -17,7 +17,7 @@ from graspscape.shared.specs.exploration import ConfigurationMatch
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose, tile_poses
 from graspscape.shared.specs.results import PoseResult
-from graspscape.shared.specs.sim import EngineName, SimSettings
+from graspscape.shared.specs.sim import SimSettings
 from graspscape.shared.wire.keys import WORKER_ID_PATTERN
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -28,6 +28,7 @@ WIRE_VERSION = 1
 INT32_MAX = 2**31 - 1
 Id = Annotated[int, Field(ge=1, le=INT32_MAX)]
 Count = Annotated[int, Field(ge=0, le=INT32_MAX)]
+EngineLabel = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
 
 
 class _Message(BaseModel):
@@ -48,9 +49,10 @@ class LeaseRequest(_Message):
     # the way (a lease reply that never arrived) and goes back to the queue at once.
     holding: list[Id] = Field(default_factory=list, max_length=64)
     # The physics engines it runs (SimSettings.engine); it is leased tiles of those only. A
-    # worker that does not say runs pybullet alone, as every worker did before MuJoCo.
-    engines: list[EngineName] = Field(default_factory=lambda: ["pybullet"], min_length=1,
-                                      max_length=8)
+    # worker that does not say runs pybullet alone, as every worker did before MuJoCo. Any
+    # name is accepted: one this coordinator does not know simply matches no exploration.
+    engines: list[EngineLabel] = Field(default_factory=lambda: ["pybullet"], min_length=1,
+                                       max_length=8)
 
 
 class ObjectRef(BaseModel):
