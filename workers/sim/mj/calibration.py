@@ -54,6 +54,6 @@ def weld_reading(evaluator, pose: Pose) -> list[float]:
             qualities.append(probe_state(scene, state, path, step, metric, evaluator.length,
                                          window))
             mujoco.mj_copyData(evaluator.data, evaluator.world.model, state)
-        scene.drive_to(*path.pose(step + 1))
+        scene.drive_to_quat(*path.drive(step + 1))
         scene.step()
     return qualities

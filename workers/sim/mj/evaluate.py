@@ -166,7 +166,7 @@ class MjEvaluator:
             if probes and step in instants:
                 saved[step] = copy = mujoco.MjData(self.world.model)
                 mujoco.mj_copyData(copy, self.world.model, self.data)
-            scene.drive_to(*path.pose(step + 1))
+            scene.drive_to_quat(*path.drive(step + 1))
             scene.step()
             ran += 1
             effort = max(effort, hand.max_finger_torque())

@@ -42,17 +42,18 @@ def probe_state(scene: MjScene, state: mujoco.MjData, path: ReferencePath, step:
     def rollout(axis: int | None, sign: float = 1.0) -> Snapshot:
         mujoco.mj_copyData(d, model, state)
         for j in range(1, window + 1):
-            position, rotation = path.pose(step + j)
-            if axis is not None:
-                amount = sign * 0.5 * (j * dt) ** 2
-                if axis < 3:
-                    position = position.copy()
-                    position[axis] += linear * amount
-                else:
-                    turn = _turn(axis - 3, angular * amount)
-                    position = pivot + turn @ (position - pivot)
-                    rotation = turn @ rotation
-            scene.drive_to(position, rotation)
+            amount = sign * 0.5 * (j * dt) ** 2
+            if axis is None or axis < 3:
+                # The reference rotation: its quaternion is converted once (path.drive).
+                position_list, quaternion = path.drive(step + j)
+                if axis is not None:
+                    position_list = list(position_list)
+                    position_list[axis] += linear * amount
+                scene.drive_to_quat(position_list, quaternion)
+            else:
+                position, rotation = path.pose(step + j)
+                turn = _turn(axis - 3, angular * amount)
+                scene.drive_to(pivot + turn @ (position - pivot), turn @ rotation)
             scene.step()
         return _snapshot(scene, anchor_local)
 

@@ -22,7 +22,7 @@ class MjGrasp:
     state: mujoco.MjData
     commands: dict[int, tuple[int, float, float]]
     effort: float
-    drive: tuple[np.ndarray, np.ndarray, float]
+    drive: tuple[np.ndarray, np.ndarray, float]  # target position, quaternion (w, x, y, z), cap
     friction: float  # the object's own coefficient (pybullet's lateral friction)
 
 
@@ -31,7 +31,7 @@ def capture(evaluator) -> MjGrasp:
     state = mujoco.MjData(evaluator.world.model)
     mujoco.mj_copyData(state, evaluator.world.model, evaluator.data)
     return MjGrasp(state, dict(hand.commands), float(hand.effort),
-                   (scene._target[0].copy(), scene._target[1].copy(), scene._cap),
+                   (scene._target_pos.copy(), scene._target_quat.copy(), scene._cap),
                    evaluator.prepared.friction)
 
 
@@ -50,7 +50,7 @@ def holds(evaluator, grasp: MjGrasp, *, effort: float | None = None,
     hand.effort = grasp.effort
     hand.reissue(effort)
     scene.set_gravity(0.0)
-    scene.drive_to(*grasp.drive)
+    scene._set_target(*grasp.drive)
     try:
         if friction is not None:
             _set_friction(evaluator, friction)

@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import mujoco
 import numpy as np
-from graspscape.workers.sim.geometry import quat_from_matrix, rotation_vector
+from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.mj.hand import MjHand
 from graspscape.workers.sim.mj.world import World
 
@@ -42,9 +42,12 @@ class MjScene:
         self.model = world.model
         self.offset, self.dt = offset, dt
         self.object_body = world.object_body
-        self._target = (np.zeros(3), np.eye(3))
+        self._target_pos, self._target_quat = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
         self._cap = DRIVE_MAX_FORCE_N
         self._gains = np.eye(6)
+        self._err = np.zeros(6)
+        self._w2, self._2w = DRIVE_BANDWIDTH_RAD_S**2, 2.0 * DRIVE_BANDWIDTH_RAD_S
+        self._link = world.geom_link
 
     def calibrate_drive(self) -> None:
         """The palm block of the mass matrix at the present (open) configuration."""
@@ -58,29 +61,33 @@ class MjScene:
     # --- the drive ---------------------------------------------------------------------
     def drive_to(self, position: np.ndarray, rotation: np.ndarray,
                  max_force: float = DRIVE_MAX_FORCE_N) -> None:
-        self._target = (np.asarray(position, float), np.asarray(rotation, float))
-        self._cap = max_force
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, np.ascontiguousarray(rotation, dtype=float).ravel())
+        self._set_target(np.asarray(position, float), quat, max_force)
 
     def drive_to_quat(self, position: list[float], quaternion: list[float],
                       max_force: float = DRIVE_MAX_FORCE_N) -> None:
+        """`drive_to` with a quaternion (x, y, z, w, as ReferencePath.drive gives it)."""
         x, y, z, w = quaternion
-        rot = np.empty(9)
-        mujoco.mju_quat2Mat(rot, np.array([w, x, y, z]))
-        self.drive_to(np.array(position), rot.reshape(3, 3), max_force)
+        self._set_target(np.array(position, float), np.array([w, x, y, z]), max_force)
+
+    def _set_target(self, position: np.ndarray, quat: np.ndarray, max_force: float) -> None:
+        self._target_pos, self._target_quat, self._cap = position, quat, max_force
 
     def _drive_force(self) -> np.ndarray:
         d, b = self.data, self.world.palm_body
-        pos, rot = d.xpos[b], d.xmat[b].reshape(3, 3)
-        target_pos, target_rot = self._target
-        v = d.qvel[self.world.palm_dofs]
-        # Free joint: linear dofs in world axes, angular dofs in the body's axes.
-        err = np.concatenate([target_pos - pos, rot.T @ rotation_vector(target_rot @ rot.T)])
-        w = DRIVE_BANDWIDTH_RAD_S
-        force = self._gains @ (w * w * err - 2.0 * w * v)
-        for part in (slice(0, 3), slice(3, 6)):
-            norm = float(np.linalg.norm(force[part]))
-            if norm > self._cap:
-                force[part] *= self._cap / norm
+        err = self._err
+        err[:3] = self._target_pos - d.xpos[b]
+        # The turn from the palm's orientation to the target's, in the palm's axes (the free
+        # joint's angular dofs are in the body's axes).
+        mujoco.mju_subQuat(err[3:], self._target_quat, d.xquat[b])
+        force = self._gains @ (self._w2 * err - self._2w * d.qvel[self.world.palm_dofs])
+        lin, ang = float(np.dot(force[:3], force[:3])), float(np.dot(force[3:], force[3:]))
+        cap2 = self._cap * self._cap
+        if lin > cap2:
+            force[:3] *= self._cap / np.sqrt(lin)
+        if ang > cap2:
+            force[3:] *= self._cap / np.sqrt(ang)
         return force
 
     def step(self) -> None:
@@ -97,18 +104,15 @@ class MjScene:
     # --- contacts ----------------------------------------------------------------------
     def _hand_contacts(self) -> list[tuple[int, int, int]]:
         """(contact index, hand link index, sign) of the hand-object contacts touching."""
-        d, link = self.data, self.world.geom_link
-        found = []
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if c.dist > CONTACT_DISTANCE_M:
-                continue
-            a, b = link[c.geom1], link[c.geom2]
-            if a != -2 and b == -2:
-                found.append((i, int(a), 1))
-            elif b != -2 and a == -2:
-                found.append((i, int(b), -1))
-        return found
+        d = self.data
+        if d.ncon == 0:
+            return []
+        links = self._link[d.contact.geom]  # (ncon, 2): a link, or -2 for the object
+        close = d.contact.dist <= CONTACT_DISTANCE_M
+        first = close & (links[:, 0] != -2) & (links[:, 1] == -2)
+        second = close & (links[:, 1] != -2) & (links[:, 0] == -2)
+        return ([(int(i), int(links[i, 0]), 1) for i in np.flatnonzero(first)]
+                + [(int(i), int(links[i, 1]), -1) for i in np.flatnonzero(second)])
 
     def in_contact(self) -> bool:
         return bool(self._hand_contacts())
@@ -148,9 +152,8 @@ class MjScene:
         mujoco.mj_forward(self.model, d)
 
     def penetrating(self, tolerance: float) -> bool:
-        d, link = self.data, self.world.geom_link
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if c.dist < -tolerance and (link[c.geom1] == -2) != (link[c.geom2] == -2):
-                return True
-        return False
+        d = self.data
+        if d.ncon == 0:
+            return False
+        hand = self._link[d.contact.geom] != -2
+        return bool(np.any((d.contact.dist < -tolerance) & (hand[:, 0] != hand[:, 1])))

@@ -9,8 +9,9 @@ What differs from pybullet, and how the model makes the two comparable (docs/sim
   each hand-object pair has the coefficient it has in pybullet.
 - Only hand-object pairs collide (contype/conaffinity), as in pybullet, which loads the URDF
   without self-collision.
-- Joint limits and contacts use a stiff `solref` (time constant 2·dt, MuJoCo's floor): the
-  default 0.02 s is far too soft for 1e-5 kg·m² phalanges driven at 1.5 N·m.
+- Joint limits and contacts use a stiff `solref` (time constant 4.2 ms, 2·dt at the default
+  step: MuJoCo's floor): the default 0.02 s is far too soft for 1e-5 kg·m² phalanges driven
+  at 1.5 N·m.
 - One `general` actuator per finger joint; the Hand (mj/hand.py) switches it between a
   force-capped velocity servo and a force-capped position servo, as pybullet's motors are.
 - Couplings (URDF <mimic>, linkages) are joint equality constraints q_f = offset + ratio·q_d.
@@ -34,6 +35,7 @@ OBJECT = "object"
 # Joint damping and armature keep the light phalanges' explicit part of the integration well
 # conditioned; pybullet's URDF joints have none, and the values are small against the motors.
 ARMATURE = 1e-4
+SOLREF_TIMECONST_S = 1.0 / 240.0  # 2 × the default MuJoCo step (240 Hz × 2 substeps)
 
 
 @dataclass(frozen=True)
@@ -85,7 +87,10 @@ def build_world(prepared: PreparedObject, hand: HandModel, dt: float, offset: np
     spec.option.gravity = [0.0, 0.0, 0.0]
     spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
     friction = prepared.friction * HAND_LINK_FRICTION
-    solref = [2.0 * dt, 1.0]
+    # A time constant in seconds, not in steps: at the default step (2.08 ms) it is MuJoCo's
+    # floor 2·dt; a finer step keeps the same contact model instead of a stiffer one, so a
+    # finer-step reference measures the integration alone.
+    solref = [max(SOLREF_TIMECONST_S, 2.0 * dt), 1.0]
     palm = spec.body(PALM)
     palm.add_freejoint(name="palm_free")
     for body in spec.bodies:
