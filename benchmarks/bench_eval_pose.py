@@ -8,6 +8,8 @@ or not, and the same grasp type) on which both agree.
     .venv/bin/python benchmarks/bench_eval_pose.py            # writes results/eval_pose.json
     .venv/bin/python benchmarks/bench_eval_pose.py --scaling-only --procs 1,2,4,8,16
                                                   # 16-core scaling: eval_pose_scaling.json
+    .venv/bin/python benchmarks/bench_eval_pose.py --engine pybullet,mujoco
+        # both engines on the grid, alternating: eval_pose_engines.json (eval_pose_engines.py)
     .venv/bin/python benchmarks/bench_eval_pose.py --against REV --rounds 2
         # also the grid on the code at git revision REV and on this tree, alternating, each in
         # a process of its own: the results must be identical (every field but timings), and
@@ -226,6 +228,20 @@ def with_iterations(settings: SimSettings, iterations: int) -> SimSettings:
     return settings.model_copy(update={"physics": physics})
 
 
+def engines_side_by_side(args: argparse.Namespace, load_before: tuple) -> None:
+    """--engine: the engines on the grid, alternating (eval_pose_engines.py)."""
+    try:
+        from benchmarks.eval_pose_engines import side_by_side
+    except ModuleNotFoundError:
+        from eval_pose_engines import side_by_side
+    figures = side_by_side(ObjectSpec(name=args.object), pose_grid(),
+                           args.engine.split(","), args.rounds)
+    extra = {"object": args.object, "load_average_start": list(load_before),
+             "load_average_end": list(os.getloadavg())}
+    if not args.no_write:
+        write_results("eval_pose_engines", figures, extra)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--object", default="pb:mug")
@@ -240,8 +256,13 @@ def main() -> None:
     parser.add_argument("--against", metavar="REV", help="also the grid on the code at git "
                         "revision REV and on this tree, alternating: identical results? CPU?")
     parser.add_argument("--rounds", type=int, default=2, help="runs of each tree (--against)")
+    parser.add_argument("--engine", help="engines side by side, e.g. pybullet,mujoco: written "
+                        "to eval_pose_engines.json (eval_pose_engines.py)")
     args = parser.parse_args()
     load_before = os.getloadavg()
+    if args.engine:
+        engines_side_by_side(args, load_before)
+        return
     if args.scaling_only:
         figures = scaling(args.object, [int(k) for k in (args.procs or "1,2").split(",")])
         write_results("eval_pose_scaling", figures, {"object": args.object,

@@ -27,6 +27,8 @@ def _pose_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--r", type=float, default=0.02, help="start gap palm ↔ object, m")
     parser.add_argument("--roll", type=float, default=0.0, help="roll about the palm normal, rad")
     parser.add_argument("--settings", type=Path, help="JSON file of SimSettings overrides")
+    parser.add_argument("--engine", choices=["pybullet", "mujoco"],
+                        help="physics engine (default: the settings', else pybullet)")
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
 
 
@@ -45,6 +47,8 @@ def _load(args: argparse.Namespace):
     _validate(obj)
     settings = (SimSettings.model_validate_json(args.settings.read_text())
                 if args.settings else SimSettings())
+    if args.engine:
+        settings = settings.model_copy(update={"engine": args.engine})
     pose = Pose(theta=args.theta, phi=args.phi, r=args.r, roll=args.roll)
     return obj, settings, pose
 

@@ -35,6 +35,7 @@ def _explore(args: argparse.Namespace) -> int:
         "friction": args.friction,
         "scale": args.scale,
         "units": args.units,
+        "engine": args.engine,
         "robustness": None if args.robustness is None else tuple(
             t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
         "quiet": args.quiet,
@@ -82,6 +83,8 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
         help="robustness tests run on every held pose, comma-separated "
         "(torque_margin, friction_margin, gravity, force, tug, shake), or 'none'; "
         "default: the exploration spec's")
+    explore.add_argument("--engine", choices=["pybullet", "mujoco"],
+                         help="physics engine (default pybullet; docs/simulation.md)")
     explore.add_argument("--quiet", action="store_true", help="no progress bar")
     explore.set_defaults(handler=_explore)
 

@@ -52,6 +52,7 @@ from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_LEVEL
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
 from graspscape.shared.specs.objects import LengthUnit
 from graspscape.shared.specs.robustness import TestName
+from graspscape.shared.specs.sim import EngineName
 from graspscape.workers.runtime.config import WorkerConfig, default_procs
 from graspscape.workers.runtime.supervisor import Supervisor
 from pydantic import BaseModel, Field
@@ -74,6 +75,8 @@ class ExploreOptions(BaseModel):
     friction: float | None = None
     scale: float | None = None
     units: LengthUnit | None = None
+    engine: EngineName | None = Field(
+        default=None, description="physics engine; None: the spec's default (pybullet)")
     robustness: tuple[TestName, ...] | None = Field(
         default=None, description="robustness tests on every held pose; None: the spec's default")
     quiet: bool = False
@@ -201,6 +204,9 @@ def run_explore(opts: ExploreOptions) -> int:
         refinement=RefinementSpec(levels=opts.levels),
         label=f"graspscape explore {opts.object}",
     )
+    if opts.engine is not None:
+        spec = spec.model_copy(update={"settings": spec.settings.model_copy(
+            update={"engine": opts.engine})})
     if opts.robustness is not None:
         sim = spec.settings
         spec = spec.model_copy(update={"settings": sim.model_copy(update={

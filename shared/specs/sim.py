@@ -13,6 +13,9 @@ from pydantic import BaseModel, ConfigDict, Field
 # The grasp synthesis policies the workers register (workers/sim/policies), named here so a
 # submitted spec is validated without loading the simulation; a test keeps the two equal.
 POLICY_NAMES: tuple[str, ...] = ("baseline", "haptic")
+# The physics engines a result can come from (workers/sim/engine.py); pybullet is the default.
+ENGINE_NAMES: tuple[str, ...] = ("pybullet", "mujoco")
+EngineName = Literal["pybullet", "mujoco"]
 
 
 class PhysicsSettings(BaseModel):
@@ -20,6 +23,10 @@ class PhysicsSettings(BaseModel):
 
     rate_hz: float = Field(default=240.0, ge=60.0, le=2000.0)
     solver_iterations: int = Field(default=50, ge=1, le=500)
+    mujoco_substeps: int = Field(
+        default=2, ge=1, le=16,
+        description="MuJoCo steps per pybullet step (MuJoCo needs ~2 ms: 4 ms let joints "
+        "pass their limits); the policy's checks and the probe windows keep their duration")
 
     @property
     def dt(self) -> float:
@@ -119,6 +126,11 @@ class MetricSettings(BaseModel):
 
 class SimSettings(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
+
+    engine: EngineName = Field(
+        default="pybullet",
+        description="physics engine: pybullet, or mujoco (its step is rate_hz × "
+        "mujoco_substeps; docs/simulation.md, \"MuJoCo\")")
 
     policy_name: str = Field(default="baseline", pattern=r"^[a-z][a-z0-9_]*$",
                              description="grasp synthesis policy (workers/sim/policies)")

@@ -32,6 +32,7 @@ Count = Annotated[int, Field(ge=0, le=INT32_MAX)]
 # lease request and batch. The coordinator binds the worker id to the first key it sees
 # (store/workers.py), so another session cannot borrow the id without knowing the key.
 SessionKey = Annotated[str, Field(pattern=r"^[0-9a-f]{32,64}$")]
+EngineLabel = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
 
 
 class _Message(BaseModel):
@@ -53,6 +54,11 @@ class LeaseRequest(_Message):
     # Tiles the worker still works on. Any other tile leased to this worker id was lost on
     # the way (a lease reply that never arrived) and goes back to the queue at once.
     holding: list[Id] = Field(default_factory=list, max_length=64)
+    # The physics engines it runs (SimSettings.engine); it is leased tiles of those only. A
+    # worker that does not say runs pybullet alone, as every worker did before MuJoCo. Any
+    # name is accepted: one this coordinator does not know simply matches no exploration.
+    engines: list[EngineLabel] = Field(default_factory=lambda: ["pybullet"], min_length=1,
+                                       max_length=8)
 
 
 class ObjectRef(BaseModel):

@@ -29,6 +29,7 @@ def _worker(args: argparse.Namespace) -> int:
         "instant": args.instant or None,
         "instant_pose_s": args.instant_pose_s,
         "tiles_per_request": args.tiles_per_request,
+        "engines": tuple(args.engine.split(",")) if args.engine else None,
     }
     config = WorkerConfig(**{k: v for k, v in options.items() if v is not None})
     return run_worker(config, args.log_level)
@@ -56,6 +57,9 @@ def register_worker(subparsers: argparse._SubParsersAction) -> None:
     worker.add_argument("--tiles-per-request", type=int,
                         help="tiles a process asks for at once (default 1; more only for "
                         "very short tiles, as with --instant)")
+    worker.add_argument("--engine", metavar="ENGINES",
+                        help="physics engines this worker runs, comma-separated (pybullet, "
+                        "mujoco; default: every one installed); it is leased tiles of those")
     worker.add_argument("--zenoh-user",
                         help="zenoh login where the coordinator or router asks for one "
                         "(default: GRASPSCAPE_ZENOH__USER, else graspscape)")

@@ -9,6 +9,8 @@ import secrets
 import socket
 from pathlib import Path
 
+from graspscape.shared.specs.sim import EngineName
+from graspscape.workers.sim.engine import available_engines
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, SerializationInfo, field_serializer
 
 
@@ -40,6 +42,9 @@ class WorkerConfig(BaseModel):
     # cut a link or kill a process in the middle of a tile without paying for physics.
     instant_pose_s: float = Field(default=0.0, ge=0, le=60)
     tiles_per_request: int = Field(default=1, ge=1, le=64)
+    # The physics engines this worker runs and advertises in its lease requests (it is leased
+    # tiles of those only): by default every one installed here.
+    engines: tuple[EngineName, ...] = Field(default_factory=available_engines, min_length=1)
     query_timeout_s: float = Field(default=10.0, gt=0)
     backoff_min_s: float = Field(default=0.2, gt=0)
     backoff_max_s: float = Field(default=5.0, gt=0)

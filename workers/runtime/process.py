@@ -137,6 +137,7 @@ class WorkerProcess:
             capacity=self.config.tiles_per_request,
             # The tile whose batch is still on its way is not lost: it stays leased.
             holding=[self.pending.batch.tile_id] if self.pending is not None else [],
+            engines=list(self.config.engines),
         )
         tiles: list[TileLease] = []
         try:

@@ -24,7 +24,6 @@ from graspscape.shared.specs.gripper import GripperSpec, load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import (
-    GraspConfiguration,
     Outcome,
     PhaseTimes,
     PoseResult,
@@ -40,8 +39,8 @@ from graspscape.workers.sim.bullet import (
     saved_state,
 )
 from graspscape.workers.sim.configuration_inference import DonorPool, inferred
-from graspscape.workers.sim.geometry import quat_from_matrix
-from graspscape.workers.sim.grasp_metrics import scene_metrics
+from graspscape.workers.sim.engine import make_evaluator
+from graspscape.workers.sim.grasp_record import grasp_fields
 from graspscape.workers.sim.gripper.hand import Hand
 from graspscape.workers.sim.metric import mu_s
 from graspscape.workers.sim.objects import (
@@ -55,7 +54,6 @@ from graspscape.workers.sim.render import render_grasp
 from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, run_tests
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
-from graspscape.workers.sim.signature import build_signature
 from graspscape.workers.sim.start_pose import StartPose, place_hand, start_pose
 from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
 
@@ -168,24 +166,7 @@ class Evaluator:
 
         hand, scene = self.scene.hand, self.scene
         grasp = capture_grasp(scene) if keep_grasp else None
-        obj_pos, obj_rot = scene.object_pose()
-        base_pos, base_rot = hand.frame_pose()
-        rel_rot = obj_rot.T @ base_rot
-        raw = [(hand.link_names[c.link_index_a],
-                tuple((obj_rot.T @ (np.array(c.position_on_b) - obj_pos)).tolist()),
-                c.normal_force) for c in scene.contacts()]
-        angles = hand.joint_angles()
-        result["grasp"] = GraspConfiguration(
-            base_position=tuple((obj_rot.T @ (base_pos - obj_pos)).tolist()),
-            base_orientation=tuple(quat_from_matrix(rel_rot)),
-            joint_angles=angles,
-        )
-        result["signature"] = build_signature(raw, angles)
-        counts: dict[str, int] = {}
-        for link, _, _ in raw:
-            counts[link] = counts.get(link, 0) + 1
-        result["contacts_per_link"] = counts
-        result.update(scene_metrics(scene, self.length, self.prepared.mass_kg))  # μg, μf, μm
+        result.update(grasp_fields(scene, self.length, self.prepared.mass_kg))
 
         if picture is not None:
             render_grasp(self.client, hand.body, scene.object_body, picture)
@@ -270,13 +251,7 @@ class Evaluator:
                            contact_free_state=self.pristine, target_drive=path.drive,
                            drive_quat=scene.drive_to_quat)
 
-        def slipped() -> bool:
-            pos, rot = hand.frame_pose()
-            o_pos, o_rot = scene.object_pose()
-            moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
-            turned = rotation_angle((rot.T @ o_rot) @ rel_rot0.T)
-            return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
-
+        slipped = slip_check(scene, spec, rel_pos0, rel_rot0)
         effort = 0.0
         held = scene.in_contact()  # a dropped object has fallen ~5 cm by now, off the hand
         # States at the sampled instants; they are probed only once the grasp has held to the
@@ -285,7 +260,6 @@ class Evaluator:
         # solver's warm-started contacts, which a restored state lacks (restore_clean), and
         # its response differs from a rollout's by up to 0.08 m/s of ~0.3.
         saved: dict[int, int] = {}
-        window = metric.window_steps
         fingers = hand.finger_joints
         ran = 0
         with ExitStack() as kept:  # the instants' states are freed however this ends
@@ -304,19 +278,26 @@ class Evaluator:
             if held and (slipped() or not scene.in_contact()):
                 held = False
             phases.trajectory_s += time.perf_counter() - t0
-            qualities: list[float] = []
             tp = time.perf_counter()
-            central = metric.differences == "central"
-            # Each probe restores its own instant cleanly first, and nothing reads the
-            # simulation after the last one (the next evaluation restores the pristine state
-            # and drops every contact; the robustness tests restore the grasp cleanly): no
-            # probe needs to put its instant back.
-            for step, state in sorted(saved.items()) if held else ():
-                qualities.append(probe_instant(ctx, step, dt, metric, self.length, state=state,
-                                               restore=False))
-                phases.sensitivity_steps += (12 if central else 7) * window
+            qualities = self._probes(ctx, saved if held else {}, phases)
         phases.sensitivity_s += time.perf_counter() - tp
         return held, qualities, effort
+
+    def _probes(self, ctx: ProbeContext, saved: dict[int, int],
+                phases: PhaseTimes) -> list[float]:
+        """The μs probes at the saved instants (step -> saved state), in step order."""
+        metric = self.settings.metric
+        central = metric.differences == "central"
+        qualities: list[float] = []
+        # Each probe restores its own instant cleanly first, and nothing reads the
+        # simulation after the last one (the next evaluation restores the pristine state
+        # and drops every contact; the robustness tests restore the grasp cleanly): no
+        # probe needs to put its instant back.
+        for step, state in sorted(saved.items()):
+            qualities.append(probe_instant(ctx, step, self.scene.dt, metric, self.length,
+                                           state=state, restore=False))
+            phases.sensitivity_steps += (12 if central else 7) * metric.window_steps
+        return qualities
 
     def _finish(self, started: float, outcome: Outcome, result: dict) -> PoseResult:
         result.setdefault("mu_s", 0.0)
@@ -326,11 +307,27 @@ class Evaluator:
         return PoseResult(**result)
 
 
+def slip_check(scene, spec, rel_pos0: np.ndarray, rel_rot0: np.ndarray):
+    """A function telling whether the object has slipped in the hand: moved more than the
+    spec's slip distance or turned more than its slip angle from where it rested at the start
+    (rel_pos0, rel_rot0: its pose in the hand's frame then). Either engine's scene."""
+    hand = scene.hand
+
+    def slipped() -> bool:
+        pos, rot = hand.frame_pose()
+        o_pos, o_rot = scene.object_pose()
+        moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
+        turned = rotation_angle((rot.T @ o_rot) @ rel_rot0.T)
+        return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
+
+    return slipped
+
+
 def default_cache_dir() -> Path:
     return Path(os.environ.get("GRASPSCAPE_CACHE_DIR", Path.home() / ".cache" / "graspscape"))
 
 
-_EVALUATORS: dict[tuple[str, str, str], Evaluator] = {}
+_EVALUATORS: dict[tuple[str, str, str], Evaluator] = {}  # or MjEvaluator (engine.py)
 
 
 def _evaluator(obj: ObjectSpec, gripper: GripperSpec | str, settings: SimSettings | None,
@@ -342,7 +339,7 @@ def _evaluator(obj: ObjectSpec, gripper: GripperSpec | str, settings: SimSetting
     evaluator = _EVALUATORS.get(key)
     if evaluator is None:
         prepared = prepare_object(obj, cache / "objects")
-        evaluator = Evaluator(prepared, spec, settings, work_dir=cache)
+        evaluator = make_evaluator(prepared, spec, settings, work_dir=cache)
         _EVALUATORS[key] = evaluator
     return evaluator
 
@@ -371,7 +368,11 @@ def render_pose(pose: Pose, path: Path, *, obj: ObjectSpec,
     where no grasp formed)."""
     evaluator = _evaluator(obj, gripper, settings, cache_dir)
     result = evaluator.evaluate(pose, picture=path)
-    if not path.exists():
+    if not path.exists() and isinstance(evaluator, Evaluator):
         render_grasp(evaluator.client, evaluator.scene.hand.body, evaluator.scene.object_body,
                      path)
+    elif not path.exists():
+        from graspscape.workers.sim.mj.picture import draw_scene
+
+        draw_scene(evaluator, path)
     return path, result

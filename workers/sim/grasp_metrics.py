@@ -2,7 +2,8 @@
 
 Pure functions on `Contact`s (object frame: positions relative to the object's centre of mass,
 unit inward normals, friction coefficient, normal force) plus the glue `scene_metrics` that
-reads the contacts of a synthesized grasp from pybullet. docs/metrics.md derives each formula.
+reads the contacts of a synthesized grasp from the scene (either engine). docs/metrics.md
+derives each formula.
 
 Units. A wrench is [f; τ/L]: torques are divided by a characteristic length L (the evaluator's,
 by default the object's radius of gyration, the same length μs uses), so force and torque rows
@@ -30,7 +31,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from graspscape.workers.sim.bullet import get_dynamics_info
 from scipy.spatial import ConvexHull, QhullError
 
 STANDARD_GRAVITY = 9.81
@@ -171,14 +171,12 @@ def merge_by_link(points: list[LinkPoint]) -> list[Contact]:
 
 def scene_contacts(scene) -> list[Contact]:
     """The synthesized grasp's contacts in the object frame, one per link."""
-    hand, cid = scene.hand, scene.client
+    hand = scene.hand
     obj_pos, obj_rot = scene.object_pose()
-    obj_mu = get_dynamics_info(cid, scene.object_body).lateral_friction
     points = []
     for c in scene.contacts():
         link = c.link_index_a
-        # pybullet combines the two bodies' lateral frictions by multiplying them.
-        mu = obj_mu * get_dynamics_info(cid, hand.body, link).lateral_friction
+        mu = scene.pair_friction(link)  # as the engine combines the two bodies' frictions
         position = obj_rot.T @ (np.array(c.position_on_b) - obj_pos)
         # The normal points from the object (B) toward the hand (A): the hand pushes the
         # object the other way.

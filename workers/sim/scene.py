@@ -10,7 +10,9 @@ import numpy as np
 import pybullet as p
 from graspscape.workers.sim.bullet import (
     ContactPoint,
+    get_closest_points,
     get_contact_points,
+    get_dynamics_info,
     get_pose,
     matrix_from_quat,
     touching_link_indices,
@@ -83,3 +85,24 @@ class Scene:
     def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
         pos, orn = get_pose(self.client, self.object_body)
         return np.array(pos), matrix_from_quat(orn)
+
+    def pair_friction(self, link: int) -> float:
+        """The friction coefficient of the hand's `link` against the object: pybullet
+        combines the two bodies' lateral frictions by multiplying them."""
+        obj_mu = get_dynamics_info(self.client, self.object_body).lateral_friction
+        return obj_mu * get_dynamics_info(self.client, self.hand.body, link).lateral_friction
+
+    def place_hand(self, position: np.ndarray, rotation: np.ndarray) -> None:
+        """The open hand at rest with its gripper frame at (position, rotation)."""
+        hand, client = self.hand, self.client
+        com, orn = hand.com_pose_for(position, rotation)
+        p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=client)
+        p.resetBaseVelocity(hand.body, [0, 0, 0], [0, 0, 0], physicsClientId=client)
+        self.drive_to(position, rotation)
+        # Contact queries report the last collision pass; refresh it for the new placement.
+        p.performCollisionDetection(physicsClientId=client)
+
+    def penetrating(self, tolerance: float) -> bool:
+        """Whether the hand interpenetrates the object deeper than `tolerance`."""
+        points = get_closest_points(self.client, self.hand.body, self.object_body, 0.0)
+        return any(pt.contact_distance < -tolerance for pt in points)

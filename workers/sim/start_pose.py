@@ -1,5 +1,5 @@
 """Where the open hand starts for a pose: placed at the lattice pose, then moved out along the
-surface normal until it no longer interpenetrates the object (the pybullet side of
+surface normal until it no longer interpenetrates the object (the simulator side of
 `placement.start_gap`; the search itself is `start_gap.first_clear_gap`).
 
 Modes (`PlacementSettings.start_gap`): "palm" backs the hand off in `backoff_step_m` steps
@@ -10,32 +10,26 @@ axis (docs/simulation.md "Start gap").
 from __future__ import annotations
 
 import numpy as np
-import pybullet as p
 from graspscape.shared.specs.placement import Placement, place_gripper
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.sim import PlacementSettings
-from graspscape.workers.sim.bullet import get_closest_points
-from graspscape.workers.sim.scene import Scene
+from graspscape.workers.sim.engine import SceneLike as Scene
 from graspscape.workers.sim.start_gap import first_clear_gap
 
 # World start position of the gripper frame, its rotation, the target x_c and the palm gap.
 StartPose = tuple[np.ndarray, np.ndarray, np.ndarray, float]
 
 
-def place_hand(client: int, scene: Scene, position: np.ndarray, rotation: np.ndarray) -> None:
-    """The open hand at rest with its gripper frame at (position, rotation)."""
-    hand = scene.hand
-    com, orn = hand.com_pose_for(position, rotation)
-    p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=client)
-    p.resetBaseVelocity(hand.body, [0, 0, 0], [0, 0, 0], physicsClientId=client)
-    scene.drive_to(position, rotation)
-    # Contact queries report the last collision pass; refresh it for the new placement.
-    p.performCollisionDetection(physicsClientId=client)
+def place_hand(client: object, scene: Scene, position: np.ndarray, rotation: np.ndarray) -> None:
+    """The open hand at rest with its gripper frame at (position, rotation); `client` is
+    unused (the scene knows its engine), kept for callers."""
+    del client
+    scene.place_hand(position, rotation)
 
 
-def penetrating(client: int, scene: Scene, tolerance: float) -> bool:
-    points = get_closest_points(client, scene.hand.body, scene.object_body, 0.0)
-    return any(pt.contact_distance < -tolerance for pt in points)
+def penetrating(client: object, scene: Scene, tolerance: float) -> bool:
+    del client
+    return scene.penetrating(tolerance)
 
 
 def start_pose(client: int, scene: Scene, mesh: object, pose: Pose,

@@ -66,7 +66,8 @@ def lease_for(session: Session, request: LeaseRequest, *, n: int, lease_seconds:
     lost = release_unheld(session, worker_id=request.worker_id, holding=request.holding)
     tiles = lease_tiles(session, worker_id=request.worker_id, n=n, lease_seconds=lease_seconds,
                         host=request.host, capacity=request.capacity,
-                        session_hash=session_hash(request.session_key))
+                        session_hash=session_hash(request.session_key),
+                        engines=request.engines)
     if tiles and session.get_bind().dialect.name == "postgresql":
         # The lease is committed; the contexts are only read, outside a transaction: one
         # round trip where a transaction of their own took three (BEGIN, the read, and the

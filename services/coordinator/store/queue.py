@@ -58,17 +58,19 @@ def lease_tiles(
     capacity: int = 1,
     now: datetime | None = None,
     session_hash: str | None = None,
+    engines: Sequence[str] = ("pybullet",),
 ) -> list[LeasedTile]:
-    """Lease up to n queued tiles to a worker, oldest exploration first. With `session_hash`
-    the worker id is bound to that session if it is not bound yet, and WorkerIdTaken is
-    raised (nothing leased) if it is bound to another."""
+    """Lease up to n queued tiles to a worker, oldest exploration first, of explorations
+    whose physics engine the worker runs (`engines`). With `session_hash` the worker id is
+    bound to that session if it is not bound yet, and WorkerIdTaken is raised (nothing
+    leased) if it is bound to another."""
     if n < 1:
         return []
     now = now or utcnow()
     session.flush()  # what the session holds goes first, as autoflush would do it
     leased = tiles.lease(session, worker_id=worker_id, n=n,
                          expires=now + timedelta(seconds=lease_seconds), now=now,
-                         skip_locked=is_postgres(session))
+                         skip_locked=is_postgres(session), engines=engines)
     exploration_ids = sorted({t.exploration_id for t in leased})
     if exploration_ids:
         session.connection().execute(_START_EXPLORATIONS, {"ids": exploration_ids, "now": now})

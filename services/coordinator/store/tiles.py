@@ -16,10 +16,10 @@ from collections.abc import Collection, Sequence
 from datetime import datetime
 from typing import Any, Protocol
 
-from graspscape.services.coordinator.store.models import TileRow, TileState
+from graspscape.services.coordinator.store.models import ExplorationRow, TileRow, TileState
 from graspscape.services.coordinator.store.pipeline import Piped, Step
 from graspscape.shared.wire.messages import LeasedTile
-from sqlalchemy import ColumnElement, bindparam, case, insert, select, update
+from sqlalchemy import ColumnElement, bindparam, case, func, insert, select, update
 from sqlalchemy.orm import Session
 
 _INSERT_CHUNK = 2000
@@ -55,10 +55,19 @@ def add_tiles(session: Session, *, exploration_id: int, level: int, tiles: Seque
 
 
 # --- leasing ---------------------------------------------------------------------------------
+def _engine_of_exploration() -> ColumnElement[str]:
+    """The exploration's physics engine (its spec's settings.engine; pybullet where a spec
+    stored before engines existed has none)."""
+    return func.coalesce(ExplorationRow.spec["settings"]["engine"].as_string(), "pybullet")
+
+
 def _lease_statement(*, skip_locked: bool) -> Any:
+    runnable = select(ExplorationRow.id).where(
+        _engine_of_exploration().in_(bindparam("engines", expanding=True)))
     candidates = (
         select(TileRow.id)
-        .where(TileRow.state == TileState.QUEUED)
+        .where(TileRow.state == TileState.QUEUED,
+               TileRow.exploration_id.in_(runnable.scalar_subquery()))
         .order_by(TileRow.exploration_id, TileRow.round, TileRow.level, TileRow.id)
         .limit(bindparam("n"))
     )
@@ -95,12 +104,14 @@ _LEASE = {False: _lease_statement(skip_locked=False), True: _lease_statement(ski
 
 
 def lease(session: Session, *, worker_id: str, n: int, expires: datetime, now: datetime,
-          skip_locked: bool) -> list[LeasedTile]:
+          skip_locked: bool, engines: Sequence[str] = ("pybullet",)) -> list[LeasedTile]:
     """Up to n queued tiles leased to a worker (oldest exploration, then earliest round,
-    then lowest level first), by tile id. Every lease bumps the epoch: ingest refuses
-    reports made under an older one."""
+    then lowest level first), by tile id, of explorations whose engine is among `engines`
+    (those the worker runs). Every lease bumps the epoch: ingest refuses reports made under
+    an older one."""
     rows = session.connection().execute(
-        _LEASE[skip_locked], {"n": n, "owner": worker_id, "expires": expires, "now": now}
+        _LEASE[skip_locked], {"n": n, "owner": worker_id, "expires": expires, "now": now,
+                              "engines": list(engines)}
     ).all()
     return sorted((LeasedTile.model_validate(row._mapping) for row in rows),
                   key=lambda t: t.tile_id)

@@ -222,14 +222,9 @@ def _parse(source: str, label: str) -> ET.Element:
         raise GripperFileError(f"{label}: not valid XML ({exc})") from None
 
 
-def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, PreparedUrdf]:
-    """The rewritten URDF text and the layout the Hand needs (path left empty)."""
-    folder = Path(spec.folder)
-    urdf_dir = resolve_inside(folder, spec.urdf).parent
-    robot = _parse(source, spec.urdf)
-    links = {link.get("name"): link for link in robot.findall("link")}
-    joints = robot.findall("joint")
-    keep = _subtree(links, joints, spec.base_link)
+def _prune(robot: ET.Element, links: dict[str, ET.Element], base_link: str) -> set[str]:
+    """Drops every link and joint outside the base link's subtree; returns the links kept."""
+    keep = _subtree(links, robot.findall("joint"), base_link)
     for element in list(robot):
         if element.tag == "link" and element.get("name") in keep:
             continue
@@ -237,9 +232,13 @@ def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, 
             continue
         if element.tag != "material":
             robot.remove(element)
-    joints = {j.get("name"): j for j in robot.findall("joint")}
+    return keep
 
-    # Graspscape names and directions of the joints the description names.
+
+def _names(spec: UrdfGripperSpec, joints: dict[str, ET.Element], keep: set[str],
+           ) -> tuple[dict[str, str], dict[str, str], dict[str, int]]:
+    """Graspscape names and directions of the joints the description names: (link renames,
+    joint renames, closing sign by vendor joint)."""
     rename: dict[str, str] = {spec.base_link: "palm"}  # links
     joint_names: dict[str, str] = {}
     sign: dict[str, int] = {}
@@ -264,19 +263,12 @@ def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, 
     taken = set(rename.values())
     for name in keep - set(rename):  # fixed links (pybullet merges them into their parent)
         rename[name] = name if name not in taken else f"{name}_fixed"
+    return rename, joint_names, sign
 
-    # A link without <inertial> has no mass in the URDF standard, but pybullet gives it 1 kg:
-    # give it a gram instead (a massless link of a moving multibody is not simulable).
-    for link in robot.findall("link"):
-        if link.find("inertial") is None:
-            ET.SubElement(link, "inertial").extend([
-                ET.fromstring('<mass value="0.001"/>'),
-                ET.fromstring('<inertia ixx="1e-8" ixy="0" ixz="0" iyy="1e-8" iyz="0" '
-                              'izz="1e-8"/>')])
 
-    # Re-root at the palm frame.
+def _reroot(spec: UrdfGripperSpec, base: ET.Element, joints: dict[str, ET.Element]) -> None:
+    """Re-root at the palm frame."""
     to_palm = np.linalg.inv(palm_transform(spec))
-    base = links[spec.base_link]
     for tag in ("inertial", "visual", "collision"):
         for element in base.findall(tag):
             _set_origin(element, to_palm @ _origin(element))
@@ -286,7 +278,11 @@ def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, 
         if joint.find("parent").get("link") == spec.base_link:
             _set_origin(joint, to_palm @ _origin(joint))
 
-    # Closing-positive joints, names, no <mimic> (pybullet ignores it; couplings do its job).
+
+def _orient(joints: dict[str, ET.Element], joint_names: dict[str, str], sign: dict[str, int],
+            rename: dict[str, str]) -> dict[str, tuple[float, float]]:
+    """Closing-positive joints, names, no <mimic> (pybullet ignores it; couplings do its job).
+    Returns each vendor joint's (lower, upper) limits after the flip."""
     values: dict[str, tuple[float, float]] = {}
     for vendor, joint in joints.items():
         lower, upper = _limits(joint, vendor) if vendor in joint_names else (0.0, 0.0)
@@ -305,18 +301,13 @@ def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, 
         joint.set("name", joint_names.get(vendor, f"{vendor}_fixed"))
         for end in ("parent", "child"):
             joint.find(end).set("link", rename[joint.find(end).get("link")])
-    for link in robot.findall("link"):
-        link.set("name", rename[link.get("name")])
+    return values
 
-    # Meshes: inside the folder only; collision meshes convex or decomposed.
-    for link in robot.findall("link"):
-        for tag in ("visual", "collision"):
-            for mesh in link.findall(f"{tag}/geometry/mesh"):
-                path = resolve_inside(folder, mesh.get("filename", ""), urdf_dir)
-                if tag == "collision":
-                    path = collision_mesh(path, mesh_cache)
-                mesh.set("filename", str(path))
 
+def _layout(spec: UrdfGripperSpec, joint_names: dict[str, str], sign: dict[str, int],
+            values: dict[str, tuple[float, float]],
+            ) -> tuple[list[JointLayout], list[Coupling]]:
+    """Each finger's actuated joints in closing order, and the mimic joints as couplings."""
     fingers, couplings = [], []
     for finger in spec.fingers:
         actuated = [j for j in finger.joints if j.mimic is None]
@@ -344,6 +335,42 @@ def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, 
             if not low <= sign[j.joint] * j.open <= high:
                 raise GripperFileError(f"joint {j.joint!r}: open value {j.open} is outside "
                                        "its limits")
+    return fingers, couplings
+
+
+def rewrite(spec: UrdfGripperSpec, source: str, mesh_cache: Path) -> tuple[str, PreparedUrdf]:
+    """The rewritten URDF text and the layout the Hand needs (path left empty)."""
+    folder = Path(spec.folder)
+    urdf_dir = resolve_inside(folder, spec.urdf).parent
+    robot = _parse(source, spec.urdf)
+    links = {link.get("name"): link for link in robot.findall("link")}
+    keep = _prune(robot, links, spec.base_link)
+    joints = {j.get("name"): j for j in robot.findall("joint")}
+    rename, joint_names, sign = _names(spec, joints, keep)
+
+    # A link without <inertial> has no mass in the URDF standard, but pybullet gives it 1 kg:
+    # give it a gram instead (a massless link of a moving multibody is not simulable).
+    for link in robot.findall("link"):
+        if link.find("inertial") is None:
+            ET.SubElement(link, "inertial").extend([
+                ET.fromstring('<mass value="0.001"/>'),
+                ET.fromstring('<inertia ixx="1e-8" ixy="0" ixz="0" iyy="1e-8" iyz="0" '
+                              'izz="1e-8"/>')])
+    _reroot(spec, links[spec.base_link], joints)
+    values = _orient(joints, joint_names, sign, rename)
+    for link in robot.findall("link"):
+        link.set("name", rename[link.get("name")])
+
+    # Meshes: inside the folder only; collision meshes convex or decomposed.
+    for link in robot.findall("link"):
+        for tag in ("visual", "collision"):
+            for mesh in link.findall(f"{tag}/geometry/mesh"):
+                path = resolve_inside(folder, mesh.get("filename", ""), urdf_dir)
+                if tag == "collision":
+                    path = collision_mesh(path, mesh_cache)
+                mesh.set("filename", str(path))
+
+    fingers, couplings = _layout(spec, joint_names, sign, values)
     vendor_names = {rename[v]: v for v in rename} | {ours: v for v, ours in joint_names.items()}
     text = ET.tostring(robot, encoding="unicode")
     return text, PreparedUrdf(Path(), tuple(fingers), tuple(couplings), vendor_names)

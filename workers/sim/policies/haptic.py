@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time
 import zlib
+from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
@@ -208,79 +209,105 @@ class HapticPolicy:
         joints = list(hand.finger_joints)
         infos = [get_joint_info(cid, hand.body, j) for j in joints]
         limits = np.array([(info.joint_lower_limit, info.joint_upper_limit) for info in infos])
-
-        def angles() -> np.ndarray:
-            return np.array(get_joint_positions(cid, hand.body, joints))
-
-        def command_joints(values: np.ndarray, force: float) -> None:
-            hand.hold_positions(joints, values.tolist(), force)
-
-        def run(steps: int) -> None:
-            for _ in range(steps):
-                scene.step()
-                phases.approach_steps += 1
-
+        run = _Run(scene, sensors, joints, limits, phases)
         t0 = time.perf_counter()
         # --- step 1: digit alignment (base still, joints only) --------------------------
         scene.drive_to(position, rotation)
-        hold = hand.hold_factor * hand.effort
-        best, best_at, aligned = np.inf, 0, False
-        for iteration in range(cfg.alignment_max_iterations):
-            d = sensors.read()
-            offsets = d[1:] - d[0]
-            # Alg. 1's condition: no link further from the object than the palm by more than
-            # Δd_s. Links closer than the palm (the open fingers reach past it) pass: they are
-            # steered away where their joint range allows, but at the opening limit they can't.
-            worst = float(np.max(offsets))
-            if worst <= cfg.alignment_tolerance_m:
-                aligned = True
-                break
-            if worst < best - cfg.alignment_stall_m:
-                best, best_at = worst, iteration
-            elif iteration - best_at >= cfg.stall_window:
-                break  # no joint configuration gets closer: the tolerance is out of reach
-            # The palm does not move in step 1, so ∂d̂/∂θ is the links' rows of ∂d/∂θ.
-            jac = joint_jacobian(sensors, joints, cfg.jacobian_joint_step_rad)[1:]
-            dq = damped_pinv_step(jac, -offsets, cfg.damping)
-            dq = np.clip(dq, -cfg.max_joint_step_rad, cfg.max_joint_step_rad)
-            command_joints(np.clip(angles() + dq, limits[:, 0], limits[:, 1]), hold)
-            run(cfg.steps_per_iteration)
-        if not aligned:
+        if not _align(run, cfg):
             phases.approach_s = time.perf_counter() - t0
             return Outcome.NO_GRASP
-
         # --- step 2: grasp closure (base pose and joints together) ----------------------
-        progress: list[float] = []
-        closed_in = False
-        for _ in range(cfg.closure_max_iterations):
-            d = sensors.read()
-            excess = np.maximum(d - cfg.closure_contact_m, 0.0)
-            if (excess <= BAND_SLACK_M).all():
-                closed_in = True
-                break  # every link touches
-            progress.append(float(excess.sum()))
-            if (len(progress) > cfg.stall_window and scene.in_contact()
-                    and progress[-cfg.stall_window - 1] - progress[-1] < cfg.closure_step_m):
-                break  # blocked by the contacts made: the grasp has emerged
-            jac = np.hstack([base_jacobian(sensors, cfg.jacobian_base_step_m,
-                                           cfg.jacobian_base_step_rad),
-                             joint_jacobian(sensors, joints, cfg.jacobian_joint_step_rad)])
-            wanted = -np.minimum(excess, cfg.closure_step_m)
-            dx = damped_pinv_step(jac, wanted, cfg.damping)
-            shift = _clip_norm(dx[:3], cfg.max_base_step_m)
-            turn = _clip_norm(dx[3:6], cfg.max_base_step_rad)
-            dq = np.clip(dx[6:], -cfg.max_joint_step_rad, cfg.max_joint_step_rad)
-            frame_pos, frame_rot = hand.frame_pose()
-            goal_rot = Rotation.from_rotvec(turn).as_matrix() @ frame_rot
-            scene.drive_to(frame_pos + shift, goal_rot, max_force=cfg.base_force_n)
-            # Joints push with at most the closing effort, as G_c's fingers do.
-            command_joints(np.clip(angles() + dq, limits[:, 0], limits[:, 1]), hand.effort)
-            run(cfg.steps_per_iteration)
+        closed_in = _close_in(run, cfg)
         phases.approach_s = time.perf_counter() - t0
         if not (closed_in or scene.in_contact()):
             return Outcome.NO_CONTACT
 
         # --- hold: the base stays, the closing torque τ_c closes the fingers (as G_c) --------
         # Phalanges not yet closing are held where step 2 left them, stiff as in G_c.
-        command_joints(angles(), hold)
+        run.command_joints(run.angles(), hand.hold_factor * hand.effort)
         return close_fingers(scene, sim.policy, phases)
+
+
+@dataclass
+class _Run:
+    """What both steps of the policy act through: the scene, the sensors and the joints."""
+
+    scene: object
+    sensors: ProximitySensors
+    joints: list[int]
+    limits: np.ndarray
+    phases: PhaseTimes
+
+    def angles(self) -> np.ndarray:
+        hand = self.scene.hand  # type: ignore[attr-defined]
+        return np.array(get_joint_positions(hand.client, hand.body, self.joints))
+
+    def command_joints(self, values: np.ndarray, force: float) -> None:
+        self.scene.hand.hold_positions(self.joints, values.tolist(), force)  # type: ignore[attr-defined]
+
+    def step_joints(self, dq: np.ndarray, force: float) -> None:
+        """Joints to their present angles + dq within their limits, pushing with `force`."""
+        self.command_joints(np.clip(self.angles() + dq, self.limits[:, 0], self.limits[:, 1]),
+                            force)
+
+    def run(self, steps: int) -> None:
+        for _ in range(steps):
+            self.scene.step()  # type: ignore[attr-defined]
+            self.phases.approach_steps += 1
+
+
+def _align(run: _Run, cfg: HapticPolicySettings) -> bool:
+    """Step 1, digit alignment: the joints move (base still) until no link is further from the
+    object than the palm by more than the tolerance; False where that is out of reach."""
+    hand = run.scene.hand  # type: ignore[attr-defined]
+    hold = hand.hold_factor * hand.effort
+    best, best_at = np.inf, 0
+    for iteration in range(cfg.alignment_max_iterations):
+        offsets = (d := run.sensors.read())[1:] - d[0]
+        # Alg. 1's condition: no link further from the object than the palm by more than
+        # Δd_s. Links closer than the palm (the open fingers reach past it) pass: they are
+        # steered away where their joint range allows, but at the opening limit they can't.
+        worst = float(np.max(offsets))
+        if worst <= cfg.alignment_tolerance_m:
+            return True
+        if worst < best - cfg.alignment_stall_m:
+            best, best_at = worst, iteration
+        elif iteration - best_at >= cfg.stall_window:
+            return False  # no joint configuration gets closer: the tolerance is out of reach
+        # The palm does not move in step 1, so ∂d̂/∂θ is the links' rows of ∂d/∂θ.
+        jac = joint_jacobian(run.sensors, run.joints, cfg.jacobian_joint_step_rad)[1:]
+        dq = damped_pinv_step(jac, -offsets, cfg.damping)
+        run.step_joints(np.clip(dq, -cfg.max_joint_step_rad, cfg.max_joint_step_rad), hold)
+        run.run(cfg.steps_per_iteration)
+    return False
+
+
+def _close_in(run: _Run, cfg: HapticPolicySettings) -> bool:
+    """Step 2, grasp closure: base pose and joints move together until every link touches
+    (True) or the contacts made block the progress or the iterations run out (False)."""
+    scene, sensors = run.scene, run.sensors
+    hand = scene.hand  # type: ignore[attr-defined]
+    progress: list[float] = []
+    for _ in range(cfg.closure_max_iterations):
+        excess = np.maximum(sensors.read() - cfg.closure_contact_m, 0.0)
+        if (excess <= BAND_SLACK_M).all():
+            return True  # every link touches
+        progress.append(float(excess.sum()))
+        if (len(progress) > cfg.stall_window and scene.in_contact()  # type: ignore[attr-defined]
+                and progress[-cfg.stall_window - 1] - progress[-1] < cfg.closure_step_m):
+            return False  # blocked by the contacts made: the grasp has emerged
+        jac = np.hstack([base_jacobian(sensors, cfg.jacobian_base_step_m,
+                                       cfg.jacobian_base_step_rad),
+                         joint_jacobian(sensors, run.joints, cfg.jacobian_joint_step_rad)])
+        dx = damped_pinv_step(jac, -np.minimum(excess, cfg.closure_step_m), cfg.damping)
+        shift = _clip_norm(dx[:3], cfg.max_base_step_m)
+        turn = _clip_norm(dx[3:6], cfg.max_base_step_rad)
+        frame_pos, frame_rot = hand.frame_pose()
+        goal_rot = Rotation.from_rotvec(turn).as_matrix() @ frame_rot
+        scene.drive_to(frame_pos + shift, goal_rot,  # type: ignore[attr-defined]
+                       max_force=cfg.base_force_n)
+        # Joints push with at most the closing effort, as G_c's fingers do.
+        run.step_joints(np.clip(dx[6:], -cfg.max_joint_step_rad, cfg.max_joint_step_rad),
+                        hand.effort)
+        run.run(cfg.steps_per_iteration)
+    return False
