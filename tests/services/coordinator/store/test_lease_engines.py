@@ -38,7 +38,8 @@ def test_a_worker_without_mujoco_is_never_leased_a_mujoco_tile(session: Session)
 
 def test_a_lease_request_without_engines_means_pybullet() -> None:
     # What a worker of before engines existed sends.
-    raw = encode(LeaseRequest(worker_id="w", capacity=1)).replace(b',"engines":["pybullet"]', b"")
+    request = LeaseRequest(worker_id="w", session_key="0" * 32, capacity=1)
+    raw = encode(request).replace(b',"engines":["pybullet"]', b"")
     assert b"engines" not in raw
     request = decode(raw)
     assert isinstance(request, LeaseRequest) and request.engines == ["pybullet"]
