@@ -120,6 +120,7 @@ def _register_atlas(subparsers: argparse._SubParsersAction) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from graspscape.services.client import cli as client_cli
     from graspscape.services.coordinator import cli as coordinator_cli
     from graspscape.services.coordinator.maps import cli as maps_cli
     from graspscape.services.local.gripper_cli import register as register_gripper
@@ -137,6 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
     _register_atlas(subparsers)
     register_run(maps_cli.register(subparsers))
     register_gripper(subparsers)
+    client_cli.register(subparsers)
     return parser
 
 
