@@ -51,13 +51,13 @@ def degrees(low: float, high: float, *, low_open: bool = False) -> Callable[[str
     return bounded("degrees", low, high, low_open=low_open)
 
 
-def add_object(parser: argparse.ArgumentParser, *, optional: bool = False) -> None:
-    """The object, as a positional (optional where a command has a default object)."""
-    if optional:
-        parser.add_argument("object", nargs="?", default="sphere",
-                            help=f"{OBJECT_HELP} (default sphere)")
-    else:
-        parser.add_argument("object", help=OBJECT_HELP)
+def add_object(parser: argparse.ArgumentParser, *, default: str | None = None) -> None:
+    """The object, as a positional (where `default` is given, it may be left out); the
+    earlier `--object` spelling stays accepted (`resolve_object` merges them)."""
+    text = OBJECT_HELP if default is None else f"{OBJECT_HELP} (default {default})"
+    parser.add_argument("object", nargs="?", help=text)
+    add_hidden_alias(parser, "--object", "object_flag")
+    parser.set_defaults(object_required=default is None, object_default=default)
 
 
 def add_object_properties(parser: argparse.ArgumentParser) -> None:
@@ -99,18 +99,19 @@ def add_grid(parser: argparse.ArgumentParser, *, dtheta: float, r: tuple[float, 
 
 
 def add_procs(parser: argparse.ArgumentParser, help_text: str = "worker processes "
-              "(default: cores)") -> None:
-    parser.add_argument("--procs", type=bounded("processes", 0, 4096, integer=True),
+              "(default: cores)", *, low: int = 1) -> None:
+    parser.add_argument("--procs", type=bounded("processes", low, 4096, integer=True),
                         help=help_text)
 
 
-def add_store(parser: argparse.ArgumentParser, *, data_dir_default: str = "data",
+def add_store(parser: argparse.ArgumentParser, *,
+              data_dir_default: str = "the settings' data_dir, else data",
               url: bool = True) -> None:
     """Where the coordinator's database is: --data-dir (the embedded SQLite file in it) and,
     where a command can read another database, --database-url."""
     parser.add_argument("--data-dir", type=Path,
-                        help=f"folder of the embedded SQLite database and results (default "
-                        f"{data_dir_default}, or the settings' data_dir)")
+                        help=f"folder of the embedded SQLite database (coordinator.db) and "
+                        f"results (default: {data_dir_default})")
     if url:
         parser.add_argument("--database-url", help="SQLAlchemy URL of the coordinator's "
                             "database, e.g. postgresql+psycopg://host/db (default: settings; "
@@ -129,3 +130,23 @@ def add_exploration_id(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("exploration_id", type=bounded("(exploration id)", 1, 2**31 - 1,
                                                        integer=True),
                         help="the exploration's id (as explore, submit and serve print it)")
+
+
+def add_hidden_alias(parser: argparse.ArgumentParser, flag: str, dest: str,
+                     **kwargs: object) -> None:
+    """An earlier spelling of a flag, still accepted and not shown (docs/cli.md, "Earlier
+    spellings")."""
+    parser.add_argument(flag, dest=dest, help=argparse.SUPPRESS, **kwargs)  # type: ignore[arg-type]
+
+
+def resolve_object(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """After parsing: the object from the positional or the earlier `--object` spelling, else
+    the command's default; argparse's one-line error where a command needs one and got none."""
+    if not hasattr(args, "object_required"):
+        return
+    flag = getattr(args, "object_flag", None)
+    if flag is not None and args.object is not None and args.object != flag:
+        parser.error(f"the object given twice: {args.object} and --object {flag}")
+    args.object = args.object or flag or args.object_default
+    if args.object is None:
+        parser.error(f"the following arguments are required: object ({OBJECT_HELP})")

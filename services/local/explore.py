@@ -77,6 +77,8 @@ class ExploreOptions(BaseModel):
     robustness: tuple[TestName, ...] | None = Field(
         default=None, description="robustness tests on every held pose; None: the spec's default")
     quiet: bool = False
+    new: bool = Field(default=False, description="explore again where this very exploration "
+                      "is done")
 
 
 def _free_port() -> int:
