@@ -71,8 +71,21 @@ def add_object_properties(parser: argparse.ArgumentParser) -> None:
                         help="length unit of a mesh file (default m)")
 
 
+def gripper(text: str) -> str:
+    """An argparse type: a gripper name as given, a path made absolute (the workers may run
+    elsewhere in the file system: another folder, another process); refused when it names
+    none, saying what to pass instead."""
+    from graspscape.shared.specs.gripper import find_gripper, unknown_gripper_message
+
+    found = find_gripper(text)
+    if found is None:
+        raise argparse.ArgumentTypeError(unknown_gripper_message(text))
+    is_name = not Path(text).suffix and len(Path(text).parts) == 1 and not Path(text).exists()
+    return text if is_name else str(Path(text).expanduser().resolve())
+
+
 def add_gripper(parser: argparse.ArgumentParser, default: str | None = None) -> None:
-    parser.add_argument("--gripper", default=default,
+    parser.add_argument("--gripper", type=gripper, default=default, metavar="NAME|PATH",
                         help=f"{GRIPPER_HELP} (default robotiq_3f)")
 
 
