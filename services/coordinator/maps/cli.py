@@ -103,18 +103,36 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
-def _export_dataset(args: argparse.Namespace) -> int:
-    from graspscape.services.coordinator.datasets.formats import FORMATS
-
-    # Written beside the target and renamed at the end: a refusal halfway leaves no torn file.
-    part = args.out.with_name(args.out.name + ".part")
+def _write_atomically(path: Path, write: Any) -> int:
+    """`write(file)` into PATH.part, renamed at the end: a refusal halfway leaves no torn
+    file."""
+    part = path.with_name(path.name + ".part")
     try:
-        with _sessions(args)() as session, part.open("w+b") as out:  # h5py reads back
-            rows = FORMATS[args.what].write(session, args.exploration_id, out)
+        with part.open("w+b") as out:  # h5py reads back
+            rows = write(out)
     except BaseException:
         part.unlink(missing_ok=True)
         raise
-    part.replace(args.out)
+    part.replace(path)
+    return int(rows)
+
+
+def _export_dataset(args: argparse.Namespace) -> int:
+    """A dataset and, beside it, the object's mesh under the name its `object.file` gives
+    (the download name of the REST export), so that it loads unchanged."""
+    from graspscape.services.coordinator.datasets.formats import FORMATS
+    from graspscape.services.coordinator.datasets.rows import object_file_name
+
+    eid = args.exploration_id
+    mesh_name = object_file_name(eid)
+    with _sessions(args)() as session:
+        rows = _write_atomically(args.out, lambda out: FORMATS[args.what].write(
+            session, eid, out, object_file=mesh_name))
+        if args.what != "object.obj":
+            mesh = args.out.with_name(mesh_name)
+            faces = _write_atomically(mesh, lambda out: FORMATS["object.obj"].write(
+                session, eid, out))
+            print(f"{mesh}: {faces} faces")
     print(f"{args.out}: {rows} {'faces' if args.what == 'object.obj' else 'poses'}")
     return 0
 
