@@ -318,8 +318,8 @@ async function viewExploration(id) {
     ["poses.csv", "poses.parquet", "manifolds.json", "object.obj", "graspgen.json", "acronym.h5"].map(
       (n) => el("a", { href: `/explorations/${id}/export/${n}`, download: true }, n)),
     el("a", { href: `/explorations/${id}/map.svg` }, "map.svg"));
-  // Two columns: the map and the manifold table on the left; the 3D view and the chosen
-  // grasp on the right, kept in view while the table scrolls.
+  // Two columns: the map and the manifold table on the left; the chosen grasp and the 3D
+  // view on the right, kept in view while the table scrolls.
   main.replaceChildren(
     el("h2", {}, `Exploration #${id}`, detail.spec.label ? ` — ${detail.spec.label}` : ""),
     factsBox,
@@ -328,8 +328,8 @@ async function viewExploration(id) {
         el("section", { class: "panel map", "aria-label": "map" }, el("h3", {}, "Behavioral map"), controls, img),
         el("section", { "aria-label": "manifolds" }, el("h3", {}, "Manifolds"), tableBox)),
       el("aside", { class: "column side", "data-testid": "side" },
-        el("section", { class: "panel", "aria-label": "3D view" }, el("h3", {}, "Approach directions"), canvasBox, legend),
-        graspBox)),
+        graspBox,
+        el("section", { class: "panel", "aria-label": "3D view" }, el("h3", {}, "Approach directions"), canvasBox, legend))),
     exportLinks);
   drawMap();
   const loadTable = async () => {

@@ -126,7 +126,11 @@ def test_the_chosen_grasp_opens_beside_the_map(served, page) -> None:
     panel.locator("[data-field=mu_s]").wait_for()
     box, the_map = panel.bounding_box(), p.locator("section.map").bounding_box()
     assert box["x"] >= the_map["x"] + the_map["width"]  # beside it, not below the table
-    assert box["y"] < p.viewport_size["height"]  # in view without scrolling
+    # Its numbers in view where the button was clicked (it was below the whole table).
+    height = p.viewport_size["height"]
+    for seen in (panel.locator("[data-field=mu_s]"), p.get_by_test_id("best-A")):
+        box = seen.bounding_box()
+        assert 0 <= box["y"] and box["y"] + box["height"] <= height, seen
     numbers = panel.get_by_test_id("grasp-numbers").inner_text()
     assert "Start gap" in numbers and " mm" in numbers and "°" in numbers
     raw = panel.get_by_test_id("raw-fields")
