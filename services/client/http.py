@@ -18,7 +18,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import httpx
 from graspscape.services.client.models import (
@@ -90,11 +90,7 @@ class Client:
                 time.sleep(self.backoff_s * 2 ** attempt)
                 continue
             if response.status_code >= 400:
-                try:
-                    detail = response.json().get("detail", response.text)
-                except ValueError:
-                    detail = response.text
-                raise ApiError(response.status_code, detail, str(response.url))
+                self._raise(response)
             return response
         raise AssertionError("unreachable")
 
@@ -217,9 +213,10 @@ class Client:
         part.replace(path)
 
     @staticmethod
-    def _raise(response: httpx.Response) -> None:
+    def _raise(response: httpx.Response) -> NoReturn:
         try:
-            detail = response.json().get("detail", response.text)
+            body = response.json()
+            detail = body.get("detail", body) if isinstance(body, dict) else body
         except ValueError:
             detail = response.text
         raise ApiError(response.status_code, detail, str(response.url))

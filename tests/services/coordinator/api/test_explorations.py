@@ -80,31 +80,6 @@ def test_submit_get_and_progress(
     assert detail["progress"]["fraction_done"] == 1.0 and detail["progress"]["eta_s"] is None
 
 
-def test_no_eta_until_it_can_be_estimated(client: TestClient, object_id: int,
-                                           sessions: sessionmaker[Session]) -> None:
-    """A few poses measure start-up, not a rate: no ETA below 10 in the window; then the rate
-    is over the time since the window's first pose (the whole window read 21 min for a 17 s
-    run)."""
-    from datetime import timedelta
-
-    from graspscape.services.coordinator.exploration.service import progress
-    from graspscape.services.coordinator.store.models import ExplorationRow
-
-    eid = submit(client, object_id)["id"]
-    stored = work(sessions, 1)
-    assert 0 < len(stored) < 10
-    assert client.get(f"/explorations/{eid}").json()["progress"]["eta_s"] is None
-    while len(stored) < 10:
-        stored += work(sessions, 1)
-    with sessions() as s:
-        row = s.get(ExplorationRow, eid)
-        first = min(s.scalars(select(PoseRow.created_at).where(PoseRow.exploration_id == eid)))
-        later = progress(s, row=row, window_s=60.0, now=first + timedelta(seconds=20))
-        assert later.throughput_poses_per_s == pytest.approx(len(stored) / 20.0, rel=0.05)
-        assert later.eta_s == pytest.approx((row.poses_total - row.poses_done)
-                                            / later.throughput_poses_per_s)
-
-
 def test_list_filters_and_pagination(client: TestClient, object_id: int) -> None:
     ids = [submit(client, object_id)["id"] for _ in range(5)]
     assert client.post(f"/explorations/{ids[1]}/cancel").status_code == 200
@@ -504,7 +479,7 @@ def test_exploration_and_tile_ids_are_never_reused_after_delete(
     client: TestClient, object_id: int, sessions: sessionmaker[Session]
 ) -> None:
     from graspscape.services.coordinator.store.models import TileRow
-    from sqlalchemy import func, select
+    from sqlalchemy import func
 
     submit(client, object_id)
     newest = submit(client, object_id)["id"]

@@ -130,7 +130,7 @@ def test_the_chosen_grasp_opens_beside_the_map(served, page) -> None:
     height = p.viewport_size["height"]
     for seen in (panel.locator("[data-field=mu_s]"), p.get_by_test_id("best-A")):
         box = seen.bounding_box()
-        assert 0 <= box["y"] and box["y"] + box["height"] <= height, seen
+        assert box["y"] >= 0 and box["y"] + box["height"] <= height, seen
     numbers = panel.get_by_test_id("grasp-numbers").inner_text()
     assert "Start gap" in numbers and " mm" in numbers and "°" in numbers
     raw = panel.get_by_test_id("raw-fields")
