@@ -94,9 +94,13 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    from graspscape.services.client.http import EXPORTS
+# As services/client/http.py's EXPORTS (a test checks they agree), here so that --help
+# imports neither httpx nor numpy.
+EXPORTS = ("poses.csv", "poses.parquet", "manifolds.json", "graspgen.json", "acronym.h5",
+           "object.obj")
 
+
+def register(subparsers: argparse._SubParsersAction) -> None:
     submit = subparsers.add_parser("submit", help="store an object on a running coordinator "
                                    "and submit its exploration (prints the id)")
     cli_args.add_object(submit)

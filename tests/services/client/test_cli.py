@@ -36,3 +36,10 @@ def test_submit_refusal_is_one_line(live_url, capsys) -> None:
     assert main(["submit", "no-such-object", "--url", live_url]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("graspscape submit: error: 422 from ") and "\n" not in err
+
+
+def test_the_commands_offer_what_the_client_exports() -> None:
+    from graspscape.services.client import EXPORTS
+    from graspscape.services.client.cli import EXPORTS as OFFERED
+
+    assert OFFERED == EXPORTS
