@@ -4,28 +4,28 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
-
-from graspscape.shared.specs.numbers import cli_number
 
 if TYPE_CHECKING:
     from graspscape.shared.specs.objects import ObjectSpec
 
 
 def _pose_args(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--object", default="sphere",
-                        help="built-in name, pb:<name>, ycb:<Folder>, or a mesh file path")
-    parser.add_argument("--mass", type=cli_number, help="object mass, kg (mesh files)")
-    parser.add_argument("--friction", type=cli_number, help="object friction coefficient")
-    parser.add_argument("--scale", type=cli_number, help="uniform object scale (default 1)")
-    parser.add_argument("--units", choices=["m", "cm", "mm"],
-                        help="length unit of a mesh file (default m)")
-    parser.add_argument("--gripper", default="robotiq_3f", help="gripper spec name or TOML path")
-    parser.add_argument("--theta", type=float, required=True, help="polar angle from +z, rad")
-    parser.add_argument("--phi", type=float, required=True, help="azimuth, rad")
-    parser.add_argument("--r", type=float, default=0.02, help="start gap palm ↔ object, m")
-    parser.add_argument("--roll", type=float, default=0.0, help="roll about the palm normal, rad")
+    from graspscape.shared import cli_args
+
+    cli_args.add_object(parser, default="sphere")
+    cli_args.add_object_properties(parser)
+    cli_args.add_gripper(parser, default="robotiq_3f")
+    parser.add_argument("--theta", type=cli_args.degrees(0, 180), required=True, metavar="DEG",
+                        help="polar angle of the approach direction from +z, degrees, [0, 180]")
+    parser.add_argument("--phi", type=cli_args.degrees(-360, 360), required=True,
+                        metavar="DEG", help="azimuth of the approach direction, degrees")
+    parser.add_argument("--r", type=cli_args.bounded("m", 0, 0.5), default=0.02, metavar="M",
+                        help="start gap palm to object, m (default 0.02)")
+    parser.add_argument("--roll", type=cli_args.degrees(-360, 360), default=0.0,
+                        metavar="DEG", help="roll about the palm normal, degrees (default 0)")
     parser.add_argument("--settings", type=Path, help="JSON file of SimSettings overrides")
     parser.add_argument("--engine", choices=["pybullet", "mujoco"],
                         help="physics engine (default: the settings', else pybullet)")
@@ -49,7 +49,9 @@ def _load(args: argparse.Namespace):
                 if args.settings else SimSettings())
     if args.engine:
         settings = settings.model_copy(update={"engine": args.engine})
-    pose = Pose(theta=args.theta, phi=args.phi, r=args.r, roll=args.roll)
+    # Degrees on the command line (shared/cli_args.py), radians in the pose.
+    pose = Pose(theta=math.radians(args.theta), phi=math.radians(args.phi), r=args.r,
+                roll=math.radians(args.roll))
     return obj, settings, pose
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from graspscape.shared import cli_args
+
 
 def _given(args: argparse.Namespace, names: dict[str, str]) -> dict[str, object]:
     """{setting: value} of the options given on the command line (option dest → setting)."""
@@ -68,8 +70,7 @@ def _db_current(args: argparse.Namespace) -> int:
 
 
 def _database_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--database-url", help="SQLAlchemy URL (default: settings)")
-    parser.add_argument("--data-dir", help="folder of the embedded SQLite database")
+    cli_args.add_store(parser)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -84,9 +85,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="run 'db upgrade' first (default: only for SQLite)",
     )
-    serve.add_argument("--no-migrate", dest="migrate", action="store_false")
+    serve.add_argument("--no-migrate", dest="migrate", action="store_false",
+                       help="do not run 'db upgrade' first, even for SQLite")
     serve.add_argument(
-        "--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"]
+        "--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"],
+        help="log messages from this level up (default info)"
     )
     serve.add_argument(
         "--no-dispatch",
@@ -127,7 +130,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     database = subparsers.add_parser("db", help="coordinator database schema")
     actions = database.add_subparsers(dest="db_command", required=True, metavar="ACTION")
     upgrade = actions.add_parser("upgrade", help="apply migrations (alembic upgrade)")
-    upgrade.add_argument("revision", nargs="?", default="head")
+    upgrade.add_argument("revision", nargs="?", default="head",
+                         help="the schema revision to migrate to (default head)")
     _database_options(upgrade)
     upgrade.set_defaults(handler=_db_upgrade)
     current = actions.add_parser("current", help="show the schema revision")

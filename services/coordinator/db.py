@@ -76,3 +76,26 @@ def current_revision(engine: Engine) -> str | None:
 
     with engine.connect() as connection:
         return MigrationContext.configure(connection).get_current_revision()
+
+
+def open_existing(url: str) -> Engine:
+    """An engine on a database that exists and has the schema; a read must not create one
+    (make_engine makes a SQLite file's folder, connecting makes the file). Refused with the
+    commands that make one."""
+    parsed = make_url(url)
+    hint = ("`graspscape explore OBJECT --data-dir DIR` explores into a new one; "
+            "`graspscape db upgrade --database-url URL` makes an empty one")
+    file = parsed.database if parsed.get_backend_name() == "sqlite" else None
+    if file not in (None, "", ":memory:") and not Path(str(file)).is_file():
+        raise FileNotFoundError(f"no database at {parsed.database}: {hint}")
+    engine = make_engine(url)
+    try:
+        revision = current_revision(engine)
+    except Exception:
+        engine.dispose()
+        raise
+    if revision is None:
+        engine.dispose()
+        raise FileNotFoundError(f"the database {parsed.render_as_string(hide_password=True)} "
+                                f"has no graspscape schema: {hint}")
+    return engine

@@ -100,7 +100,8 @@ def _write_exports(session: Session, eid: int, folder: Path) -> list[str]:
     for name in ("object.obj", "graspgen.json"):
         try:
             with (folder / name).open("wb") as f:
-                FORMATS[name].write(session, eid, f)
+                # object.file names the mesh written beside it in the site folder
+                FORMATS[name].write(session, eid, f, object_file="object.obj")
             written.append(name)
         except Exception:  # no mesh in this process: the page says what is missing
             (folder / name).unlink(missing_ok=True)

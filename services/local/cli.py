@@ -13,8 +13,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_R
-from graspscape.shared.specs.numbers import cli_number
+from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_LEVELS, DEFAULT_R
+from graspscape.shared import cli_args
 
 
 def _explore(args: argparse.Namespace) -> int:
@@ -39,6 +39,7 @@ def _explore(args: argparse.Namespace) -> int:
         "robustness": None if args.robustness is None else tuple(
             t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
         "quiet": args.quiet,
+        "new": args.new,
     }
     return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
 
@@ -52,32 +53,12 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
         "cancelled, 130 interrupted. The same command again resumes an unfinished exploration "
         "and queues its failed tiles again.",
     )
-    explore.add_argument(
-        "object", help="built-in name (sphere, cube, mug, ...), pb:<name>, ycb:<Folder> or a "
-        "mesh file"
-    )
-    explore.add_argument("--gripper", help="gripper spec name (default robotiq_3f)")
-    explore.add_argument(
-        "--dtheta",
-        type=float,
-        help=f"angle between approach directions, degrees (default {DEFAULT_DTHETA_DEG:g})",
-    )
-    explore.add_argument("--r-min", type=float, help=f"smallest start gap, m ({DEFAULT_R[0]})")
-    explore.add_argument("--r-max", type=float, help=f"largest start gap, m ({DEFAULT_R[1]})")
-    explore.add_argument("--dr", type=float, help=f"start gap step, m ({DEFAULT_R[2]})")
-    explore.add_argument("--rolls", type=int, choices=[1, 2, 4, 8], help="rolls per point (1)")
-    explore.add_argument("--levels", type=int, choices=range(7), metavar="{0..6}",
-                         help="border refinement levels (1): halvings of the grid where "
-                         "neighbouring poses differ")
-    explore.add_argument("--procs", type=int, help="worker processes (default: cores)")
-    explore.add_argument(
-        "--data-dir", type=Path, help="folder of the database and results (default data)"
-    )
-    explore.add_argument("--mass", type=cli_number, help="object mass, kg")
-    explore.add_argument("--friction", type=cli_number, help="object friction coefficient")
-    explore.add_argument("--scale", type=cli_number, help="uniform object scale (default 1)")
-    explore.add_argument("--units", choices=["m", "cm", "mm"],
-                         help="length unit of a mesh file (default m)")
+    cli_args.add_object(explore)
+    cli_args.add_gripper(explore)
+    cli_args.add_grid(explore, dtheta=DEFAULT_DTHETA_DEG, r=DEFAULT_R, levels=DEFAULT_LEVELS)
+    cli_args.add_procs(explore)
+    cli_args.add_store(explore, data_dir_default="data", url=False)
+    cli_args.add_object_properties(explore)
     explore.add_argument(
         "--robustness", metavar="TESTS",
         help="robustness tests run on every held pose, comma-separated "
@@ -86,13 +67,17 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
     explore.add_argument("--engine", choices=["pybullet", "mujoco"],
                          help="physics engine (default pybullet; docs/simulation.md)")
     explore.add_argument("--quiet", action="store_true", help="no progress bar")
+    explore.add_argument("--new", action="store_true",
+                         help="explore again even where this very exploration is done (by "
+                         "default its stored results are printed)")
     explore.set_defaults(handler=_explore)
 
 
 def _atlas(args: argparse.Namespace) -> int:
     from graspscape.services.local.atlas import AtlasOptions, run_atlas
 
-    given = {"setting": args.setting, "objects_dir": args.objects, "only": tuple(args.only or ()),
+    given = {"setting": args.setting, "objects_dir": args.objects_dir,
+             "only": tuple(args.only or ()),
              "data_dir": args.data_dir, "out": args.out, "database_url": args.database_url,
              "procs": args.procs, "pictures": not args.no_pictures, "quiet": args.quiet}
     return run_atlas(AtlasOptions(**{k: v for k, v in given.items() if v is not None}))
@@ -107,16 +92,16 @@ def _register_atlas(subparsers: argparse._SubParsersAction) -> None:
     atlas.add_argument("--setting", choices=["reduced", "full"],
                        help="reduced (default: 30° grid, no refinement, no robustness tests; "
                        "under an hour on 2 cores) or full (explore's defaults)")
-    atlas.add_argument("--objects", type=Path, help="objects folder: ycb/<Folder>/model.urdf "
-                       "and mesh files (default ../shared/objects beside the checkout)")
+    atlas.add_argument("--objects-dir", type=Path, help="objects folder: "
+                       "ycb/<Folder>/model.urdf and mesh files (default ../shared/objects "
+                       "beside the checkout)")
+    cli_args.add_hidden_alias(atlas, "--objects", "objects_dir", type=Path)
     atlas.add_argument("--only", action="append", metavar="NAME",
                        help="only this object (repeatable), e.g. mug or ycb:YcbBanana")
-    atlas.add_argument("--data-dir", type=Path, help="database folder (default atlas-data)")
     atlas.add_argument("--out", type=Path, help="site folder (default atlas)")
-    atlas.add_argument("--database-url", help="a running coordinator's database: explore on "
-                       "the workers connected to it (with --procs 0)")
-    atlas.add_argument("--procs", type=int, help="local worker processes (default: cores; 0: "
-                       "none, the coordinator's workers)")
+    cli_args.add_store(atlas, data_dir_default="atlas-data")
+    cli_args.add_procs(atlas, "local worker processes (default: cores; 0: none, the workers "
+                       "of the coordinator whose --database-url is given)", low=0)
     atlas.add_argument("--no-pictures", action="store_true",
                        help="no best-grasp pictures in the site (each is a simulation)")
     atlas.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -124,6 +109,7 @@ def _register_atlas(subparsers: argparse._SubParsersAction) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from graspscape.services.client import cli as client_cli
     from graspscape.services.coordinator import cli as coordinator_cli
     from graspscape.services.coordinator.maps import cli as maps_cli
     from graspscape.services.local.gripper_cli import register as register_gripper
@@ -141,12 +127,14 @@ def build_parser() -> argparse.ArgumentParser:
     _register_atlas(subparsers)
     register_run(maps_cli.register(subparsers))
     register_gripper(subparsers)
+    client_cli.register(subparsers)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    cli_args.resolve_object(parser, args)
     try:
         from graspscape.services.local.compose import wire
 

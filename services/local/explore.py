@@ -57,7 +57,7 @@ from graspscape.workers.runtime.config import WorkerConfig, default_procs
 from graspscape.workers.runtime.supervisor import Supervisor
 from pydantic import BaseModel, Field
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 
 
 class ExploreOptions(BaseModel):
@@ -80,6 +80,8 @@ class ExploreOptions(BaseModel):
     robustness: tuple[TestName, ...] | None = Field(
         default=None, description="robustness tests on every held pose; None: the spec's default")
     quiet: bool = False
+    new: bool = Field(default=False, description="explore again where this very exploration "
+                      "is done")
 
 
 def _free_port() -> int:
@@ -94,26 +96,31 @@ _UNFINISHED = (ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)
 _RETRYABLE = (ExplorationStatus.INCOMPLETE, ExplorationStatus.FAILED)
 
 
-def _exploration(session: Session, spec: ExplorationSpec,
-                 settings: Settings) -> tuple[int, bool, int]:
-    """The unfinished exploration of this very spec (resumed; one that ended incomplete or
-    failed has its failed tiles queued again), or a new one. (id, resumed, tiles retried)"""
+def _exploration(session: Session, spec: ExplorationSpec, settings: Settings,
+                 new: bool = False) -> tuple[int, str, int]:
+    """The exploration of this very spec: a done one (unless `new`), an unfinished one
+    (resumed; one that ended incomplete or failed has its failed tiles queued again), or a new
+    one. (id, how: "done", "resuming" or "exploration", tiles retried)"""
     # As stored: with the grid's azimuth multiple decided at submission (else no stored spec
     # ever equals the one asked for, and nothing was resumed).
     wanted = resolve_grid(session, spec).model_dump(mode="json")
+    reusable = _UNFINISHED + _RETRYABLE + (() if new else (ExplorationStatus.DONE,))
     for row in session.scalars(
         select(ExplorationRow)
-        .where(ExplorationRow.status.in_(_UNFINISHED + _RETRYABLE))
-        .order_by(ExplorationRow.status.in_(_RETRYABLE), ExplorationRow.id.desc())
+        .where(ExplorationRow.status.in_(reusable))
+        .order_by(ExplorationRow.status != ExplorationStatus.DONE,
+                  ExplorationRow.status.in_(_RETRYABLE), ExplorationRow.id.desc())
     ):
         if row.spec == wanted:
+            if row.status == ExplorationStatus.DONE:
+                return row.id, "done", 0
             retried = 0
             if row.status in _RETRYABLE:
                 retried = retry_failed_tiles(session, exploration_id=row.id)
-            return row.id, True, retried
+            return row.id, "resuming", retried
     row = create_exploration(session, spec=spec, tile_target_poses=settings.queue.tile_target_poses,
                              max_poses=settings.queue.max_poses_per_exploration)
-    return row.id, False, 0
+    return row.id, "exploration", 0
 
 
 def outcome_line(session: Session, exploration_id: int, stored: int, elapsed_s: float) -> str:
@@ -185,19 +192,9 @@ def _export_csv(session: Session, exploration_id: int, path: Path) -> int:
     return len(rows)
 
 
-def run_explore(opts: ExploreOptions) -> int:
-    data_dir = opts.data_dir.resolve()
-    data_dir.mkdir(parents=True, exist_ok=True)
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    settings = Settings(
-        database=DatabaseSettings(
-            data_dir=data_dir, url=f"sqlite:///{(data_dir / 'coordinator.db').as_posix()}"),
-        zenoh=ZenohSettings(enabled=True, mode="peer", listen=[endpoint], connect=[]),
-    )
-    wire()
-    engine, sessions = open_store(settings.database.resolved_url)
+def _spec(opts: ExploreOptions) -> ExplorationSpec:
     spec = ExplorationSpec(
-        object_id=1,  # replaced below, once the object is stored
+        object_id=1,  # replaced once the object is stored
         gripper=opts.gripper,
         grid=PoseGridSpec(dtheta=math.radians(opts.dtheta_deg), r_min=opts.r_min,
                           r_max=opts.r_max, dr=opts.dr, attitudes={"rolls": opts.rolls}),
@@ -211,21 +208,38 @@ def run_explore(opts: ExploreOptions) -> int:
         sim = spec.settings
         spec = spec.model_copy(update={"settings": sim.model_copy(update={
             "robustness": sim.robustness.model_copy(update={"tests": opts.robustness})})})
+    return spec
+
+
+def _plan(opts: ExploreOptions, sessions: sessionmaker[Session],
+          settings: Settings) -> tuple[int, str, int, int]:
+    """Store the object, find or create the exploration: (id, how, tiles retried, poses)."""
     with sessions() as session:
         object_id = store_object(session, opts.object, mass_kg=opts.mass_kg,
                                  friction=opts.friction, scale=opts.scale, units=opts.units)
-        spec = spec.model_copy(update={"object_id": object_id})
-        exploration_id, resumed, retried = _exploration(session, spec, settings)
+        spec = _spec(opts).model_copy(update={"object_id": object_id})
+        exploration_id, how, retried = _exploration(session, spec, settings, opts.new)
         # Every worker of this command starts now, so any lease still held is an orphan of
         # an earlier, interrupted run.
         requeue_lost(session, alive=[], max_attempts=settings.queue.max_attempts)
         total = session.scalar(
             select(ExplorationRow.poses_total).where(ExplorationRow.id == exploration_id))
-    say = (lambda *a: None) if opts.quiet else (lambda msg: print(msg, file=sys.stderr))
-    say(f"{'resuming' if resumed else 'exploration'} {exploration_id}: {total} poses of "
-        f"{opts.object} with {opts.gripper}, {opts.procs} worker processes"
-        + (f"; {retried} failed tiles queued again" if retried else ""))
+    return exploration_id, how, retried, total or 0
 
+
+def _progress(session: Session, exploration_id: int) -> tuple[str, int, int, int, int]:
+    """(status, poses done, poses planned, viable, tiles failed)"""
+    row = session.get(ExplorationRow, exploration_id)
+    assert row is not None
+    failed = session.scalar(
+        select(func.count()).select_from(TileRow).where(
+            TileRow.exploration_id == exploration_id, TileRow.state == TileState.FAILED)) or 0
+    return row.status, row.poses_done, row.poses_total, row.viable_count, failed
+
+
+def _drive(opts: ExploreOptions, sessions: sessionmaker[Session], settings: Settings,
+           endpoint: str, exploration_id: int) -> bool:
+    """Run the dispatch and the workers until the exploration finishes; True if interrupted."""
     dispatcher = Dispatcher(settings, sessions)
     dispatcher.start()
     if not dispatcher.ready:
@@ -234,37 +248,29 @@ def run_explore(opts: ExploreOptions) -> int:
     supervisor = Supervisor(
         WorkerConfig(connect=[endpoint], procs=opts.procs, name="explore"), log_level="warning"
     )
-    started = time.monotonic()
-    status = ExplorationStatus.RUNNING
-    interrupted = False
     try:
         supervisor.start()
         first_done: tuple[float, int] | None = None
         while True:
             supervisor.poll()
             with sessions() as session:
-                row = session.get(ExplorationRow, exploration_id)
-                assert row is not None
-                status, done, total, viable = (row.status, row.poses_done, row.poses_total,
-                                               row.viable_count)
-                failed_now = session.scalar(
-                    select(func.count()).select_from(TileRow).where(
-                        TileRow.exploration_id == exploration_id,
-                        TileRow.state == TileState.FAILED)) or 0
+                status, done, total, viable, failed = _progress(session, exploration_id)
             now = time.monotonic()
             if first_done is None and done > 0:
                 first_done = (now, done)  # rate from the first result: start-up excluded
             rate = ((done - first_done[1]) / (now - first_done[0])
                     if first_done and now > first_done[0] else 0.0)
             if not opts.quiet:
-                print(_bar(done, total, viable, rate, failed_now), end="", file=sys.stderr,
+                print(_bar(done, total, viable, rate, failed), end="", file=sys.stderr,
                       flush=True)
             if status in FINISHED_STATUSES:
-                break
+                return False
             time.sleep(0.5)
     except KeyboardInterrupt:
-        interrupted = True
-        say("\ninterrupted: workers finish their pose and hand the rest back ...")
+        if not opts.quiet:
+            print("\ninterrupted: workers finish their pose and hand the rest back ...",
+                  file=sys.stderr)
+        return True
     finally:
         # A second Ctrl-C must not cut the clean-up short: an open zenoh session would keep
         # the interpreter from exiting, and unreleased tiles would wait for expiry.
@@ -274,14 +280,18 @@ def run_explore(opts: ExploreOptions) -> int:
         finally:
             dispatcher.stop()
             signal.signal(signal.SIGINT, previous)
-    elapsed = time.monotonic() - started
+
+
+def _report(sessions: sessionmaker[Session], data_dir: Path, exploration_id: int,
+            interrupted: bool, elapsed: float) -> str:
+    """Write the CSV, map and table; print where they are and the robust bests; return the
+    exploration's status."""
     with sessions() as session:
         csv_path = data_dir / f"exploration-{exploration_id}.csv"
         n = _export_csv(session, exploration_id, csv_path)
         map_path = data_dir / f"exploration-{exploration_id}-map.png"
         table_path = data_dir / f"exploration-{exploration_id}-manifolds.json"
-        manifolds = None
-        robust = None
+        manifolds = robust = None
         if n and not interrupted:
             manifolds, _ = write_map_files(session, exploration_id, map_path, table_path)
             robust = robust_summary(session, exploration_id)
@@ -289,9 +299,7 @@ def run_explore(opts: ExploreOptions) -> int:
                    "again to resume" if interrupted
                    else outcome_line(session, exploration_id, n, elapsed))
         status = session.scalar(
-            select(ExplorationRow.status).where(ExplorationRow.id == exploration_id)) or status
-    engine.dispose()
-    say("")
+            select(ExplorationRow.status).where(ExplorationRow.id == exploration_id))
     print(f"results: {csv_path}")
     if manifolds is not None:
         print(f"map: {map_path} ({manifolds} behavioral manifolds; table: {table_path})")
@@ -303,4 +311,36 @@ def run_explore(opts: ExploreOptions) -> int:
     # Last, on stdout even with --quiet: what became of the exploration; the exit status says
     # the same (0 done, 2 incomplete, 1 failed or cancelled, 130 interrupted).
     print(outcome)
+    return status or ExplorationStatus.FAILED
+
+
+def run_explore(opts: ExploreOptions) -> int:
+    data_dir = opts.data_dir.resolve()
+    data_dir.mkdir(parents=True, exist_ok=True)
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    settings = Settings(
+        database=DatabaseSettings(
+            data_dir=data_dir, url=f"sqlite:///{(data_dir / 'coordinator.db').as_posix()}"),
+        zenoh=ZenohSettings(enabled=True, mode="peer", listen=[endpoint], connect=[]),
+    )
+    wire()
+    engine, sessions = open_store(settings.database.resolved_url)
+    exploration_id, how, retried, total = _plan(opts, sessions, settings)
+    say = (lambda *a: None) if opts.quiet else (lambda msg: print(msg, file=sys.stderr))
+    if how == "done":
+        say(f"exploration {exploration_id} of {opts.object} with {opts.gripper} is done: its "
+            "stored results (--new explores again)")
+    else:
+        say(f"{how} {exploration_id}: {total} poses of {opts.object} with {opts.gripper}, "
+            f"{opts.procs} worker processes"
+            + (f"; {retried} failed tiles queued again" if retried else ""))
+    started = time.monotonic()
+    interrupted = (how != "done"
+                   and _drive(opts, sessions, settings, endpoint, exploration_id))
+    elapsed = time.monotonic() - started
+    say("")
+    try:
+        status = _report(sessions, data_dir, exploration_id, interrupted, elapsed)
+    finally:
+        engine.dispose()
     return EXIT_INTERRUPTED if interrupted else exit_status(status)

@@ -35,6 +35,8 @@ def _check(args: argparse.Namespace) -> int:
         print(f"  {t.object}, {t.start}: {t.outcome}, μs {t.mu_s:.2f}, touching "
               f"{', '.join(t.links_in_contact) or 'nothing'}")
     print(f"  pictures in {out}/")
+    for warning in report.warnings:
+        print(f"  warning: {warning}")
     for problem in report.problems:
         print(f"  problem: {problem}")
     if not report.problems:
@@ -47,8 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     commands = gripper.add_subparsers(dest="gripper_command", required=True, metavar="ACTION")
     check = commands.add_parser(
         "check", help="load a gripper, render it, close it on a sphere and a box, report")
-    check.add_argument("gripper", help="a gripper name, a TOML spec, or a URDF gripper's "
-                       "folder (with gripper.toml)")
+    check.add_argument("gripper", help="a gripper name (searched in GRASPSCAPE_GRIPPER_PATH, "
+                       "then the shipped grippers), a TOML spec, or a URDF gripper's folder "
+                       "(with gripper.toml; not the .urdf file itself)")
     check.add_argument("-o", "--out", type=Path, help="folder of the pictures "
                        "(default gripper-check-NAME)")
     check.add_argument("--json", action="store_true", help="print the report as JSON")

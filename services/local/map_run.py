@@ -15,25 +15,31 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from graspscape.shared import cli_args
+
+# `map run`'s grid: coarser than explore's, for a quick map (degrees; r_min, r_max, dr in m).
+RUN_DTHETA_DEG = 30.0
+RUN_R = (0.0, 0.02, 0.01)
+
 
 def register_run(map_actions: Any) -> None:
     from graspscape.services.coordinator.maps.cli import picture_args
 
     run = map_actions.add_parser("run", help="explore an object here (pybullet, SQLite) and "
                                  "map it")
-    run.add_argument("--object", required=True, help="object name (sphere, cube, mug, …)")
-    run.add_argument("--gripper", default="robotiq_3f")
-    run.add_argument("--dtheta", type=float, default=30.0, help="coarse step, degrees")
-    run.add_argument("--r-min", type=float, default=0.0)
-    run.add_argument("--r-max", type=float, default=0.02)
-    run.add_argument("--dr", type=float, default=0.01)
-    run.add_argument("--rolls", type=int, choices=[1, 2, 4, 8], default=1)
-    run.add_argument("--levels", type=int, default=1, help="refinement depth")
-    run.add_argument("--normal-reuse", action="store_true", help="shortcut 1")
-    run.add_argument("--processes", type=int, default=1)
-    run.add_argument("--db", type=Path, default=None, help="SQLite file (default: a temp file)")
-    run.add_argument("-o", "--out", type=Path, default=Path("map.png"))
-    run.add_argument("--table", type=Path, default=None, help="write the manifold table (JSON)")
+    cli_args.add_object(run)
+    cli_args.add_gripper(run)
+    cli_args.add_grid(run, dtheta=RUN_DTHETA_DEG, r=RUN_R, levels=1)
+    run.add_argument("--normal-reuse", action="store_true",
+                     help="shortcut 1: reuse a normal's results across its start gaps")
+    cli_args.add_procs(run, "simulation processes (default 1)")
+    cli_args.add_hidden_alias(run, "--processes", "procs", type=int)
+    cli_args.add_store(run, data_dir_default="a new temporary folder", url=False)
+    cli_args.add_hidden_alias(run, "--db", "db", type=Path)
+    run.add_argument("-o", "--out", type=Path, default=Path("map.png"),
+                     help="map picture, PNG or SVG by suffix (default map.png)")
+    run.add_argument("--table", type=Path, default=None,
+                     help="also write the manifold table here (JSON)")
     picture_args(run)
     run.set_defaults(handler=_run)
 
@@ -48,23 +54,33 @@ def _run(args: argparse.Namespace) -> int:
     from graspscape.shared.specs.exploration import ExplorationSpec
     from graspscape.shared.specs.objects import ObjectSpec
 
-    path = args.db or Path(tempfile.mkdtemp()) / "map.db"
+    if args.db is not None:  # the earlier --db FILE
+        path = args.db
+    else:
+        path = (args.data_dir or Path(tempfile.mkdtemp())) / "coordinator.db"
+        path.parent.mkdir(parents=True, exist_ok=True)
+    given = {"dtheta": args.dtheta, "r_min": args.r_min, "r_max": args.r_max, "dr": args.dr}
+    defaults = dict(zip(("dtheta", "r_min", "r_max", "dr"), (RUN_DTHETA_DEG, *RUN_R),
+                        strict=True))
+    grid = {k: defaults[k] if v is None else v for k, v in given.items()}
+    gripper = args.gripper or "robotiq_3f"
     engine, sessions = open_store(f"sqlite:///{path}")
     with sessions() as session:
         spec = ExplorationSpec(
-            object_id=store_object(session, args.object), gripper=args.gripper,
+            object_id=store_object(session, args.object), gripper=gripper,
             label=args.object,
-            grid={"dtheta": math.radians(args.dtheta), "r_min": args.r_min, "r_max": args.r_max,
-                  "dr": args.dr, "attitudes": {"rolls": args.rolls}},
-            refinement={"levels": args.levels},
+            grid={**grid, "dtheta": math.radians(grid["dtheta"]),
+                  "attitudes": {"rolls": args.rolls or 1}},
+            refinement={"levels": 1 if args.levels is None else args.levels},
             shortcuts={"normal_reuse": args.normal_reuse},
         )
         exploration_id = create_exploration(session, spec=spec, tile_target_poses=50,
                                             max_poses=10**7).id
-    pool = ProcessPoolExecutor(args.processes) if args.processes > 1 else None
+    procs = args.procs or 1
+    pool = ProcessPoolExecutor(procs) if procs > 1 else None
     try:
         stats = run_local(sessions, pybullet_evaluator(ObjectSpec(name=args.object),
-                                                       args.gripper, pool=pool))
+                                                       gripper, pool=pool))
     finally:
         if pool is not None:
             pool.shutdown()

@@ -12,14 +12,13 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from graspscape.shared.specs.gripper import list_grippers
+from graspscape.shared.specs.gripper import find_gripper, unknown_gripper_message
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import POLICY_NAMES, SimSettings
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 # Names of grippers and policies are resolved by the workers (configs/grippers, policy
 # registry); here they only have to be safe identifiers.
-_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 
 
 class AttitudeSpec(BaseModel):
@@ -307,7 +306,10 @@ class ExplorationSpec(BaseModel):
         ge=1, le=2**31 - 1, description="id of an object stored through POST /objects"
     )
     gripper: str = Field(
-        default="robotiq_3f", pattern=_NAME_PATTERN, description="gripper spec name"
+        default="robotiq_3f", min_length=1, max_length=1024, pattern=r"^[^\x00-\x1f]*$",
+        description="gripper: a name (the shipped grippers, or one in the folders of "
+        "GRASPSCAPE_GRIPPER_PATH), or an absolute path to a TOML spec or a URDF gripper's "
+        "folder, as the coordinator and the workers see it"
     )
     grid: PoseGridSpec = Field(default_factory=PoseGridSpec)
     settings: SimSettings = Field(
@@ -337,9 +339,8 @@ class ExplorationSpec(BaseModel):
     @field_validator("gripper")
     @classmethod
     def _known_gripper(cls, name: str) -> str:
-        known = list_grippers()
-        if name not in known:
-            raise ValueError(f"unknown gripper {name!r}; known: {', '.join(known)}")
+        if find_gripper(name) is None:
+            raise ValueError(unknown_gripper_message(name))
         return name
 
     @field_validator("settings", mode="before")

@@ -10,6 +10,7 @@ the mount frame the finger extends along +z and closes toward +x.
 
 from __future__ import annotations
 
+import os
 import re
 import tomllib
 from pathlib import Path
@@ -17,7 +18,11 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+# The shipped grippers: configs/grippers/ of the checkout, which an installed copy carries as
+# graspscape/configs/grippers/ (setup.py), at the same place relative to this file.
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "grippers"
+# Folders of one's own grippers, searched before the shipped ones (os.pathsep-separated).
+GRIPPER_PATH_ENV = "GRASPSCAPE_GRIPPER_PATH"
 
 
 class PalmSpec(BaseModel):
@@ -218,16 +223,56 @@ class UrdfGripperSpec(BaseModel):
 AnyGripperSpec = GripperSpec | UrdfGripperSpec
 
 
-def _urdf_folder(name_or_path: str) -> Path | None:
-    path = Path(name_or_path)
+def gripper_dirs() -> list[Path]:
+    """Where a gripper name is looked up: GRASPSCAPE_GRIPPER_PATH's folders, then the shipped
+    grippers."""
+    given = os.environ.get(GRIPPER_PATH_ENV, "")
+    return [Path(p).expanduser() for p in given.split(os.pathsep) if p] + [CONFIG_DIR]
+
+
+def _urdf_folder(path: Path) -> Path | None:
     if path.is_dir() and (path / URDF_DESCRIPTION).is_file():
         return path
     if path.name == URDF_DESCRIPTION and path.is_file():
         return path.parent
-    named = CONFIG_DIR / name_or_path
-    if not path.suffix and (named / URDF_DESCRIPTION).is_file():
-        return named
     return None
+
+
+def find_gripper(name_or_path: str) -> Path | None:
+    """The file or folder a gripper names: a path to a TOML spec or a URDF gripper's folder
+    (or its gripper.toml), or a name looked up in `gripper_dirs()` (NAME.toml, or a folder
+    NAME/ with gripper.toml); None if none exists."""
+    path = Path(name_or_path).expanduser()
+    if path.suffix == ".toml" and path.is_file() and path.name != URDF_DESCRIPTION:
+        return path
+    folder = _urdf_folder(path)
+    if folder is not None:
+        return folder
+    if path.suffix or len(path.parts) != 1:  # a path, and nothing there
+        return None
+    for directory in gripper_dirs():
+        if (directory / f"{name_or_path}.toml").is_file():
+            return directory / f"{name_or_path}.toml"
+        if (directory / name_or_path / URDF_DESCRIPTION).is_file():
+            return directory / name_or_path
+    return None
+
+
+def unknown_gripper_message(name_or_path: str) -> str:
+    """Why `name_or_path` names no gripper, and what to pass instead."""
+    path = Path(name_or_path)
+    if path.suffix.lower() in (".urdf", ".xacro", ".sdf"):
+        folder = path.parent if str(path.parent) not in ("", ".") else Path(".")
+        has = (folder / URDF_DESCRIPTION).is_file()
+        return (f"{name_or_path} is a robot description, not a gripper: pass its folder "
+                f"({folder}){' which has' if has else ', with'} a {URDF_DESCRIPTION} that "
+                "says which links are the palm and fingers (docs/grippers.md, 'A URDF gripper')")
+    if path.suffix or len(path.parts) != 1:
+        return (f"no gripper at {name_or_path}: a TOML spec file, or a folder with "
+                f"{URDF_DESCRIPTION}, is expected")
+    where = ", ".join(str(d) for d in gripper_dirs())
+    return (f"unknown gripper {name_or_path!r}; known: {', '.join(list_grippers())} "
+            f"(searched {where}; add folders with {GRIPPER_PATH_ENV})")
 
 
 def load_urdf_gripper(folder: Path) -> UrdfGripperSpec:
@@ -237,21 +282,22 @@ def load_urdf_gripper(folder: Path) -> UrdfGripperSpec:
 
 
 def load_gripper(name_or_path: str) -> AnyGripperSpec:
-    """A gripper by name (configs/grippers/NAME.toml, or the folder configs/grippers/NAME/ of a
-    URDF gripper), by path to a TOML spec, or by path to a URDF gripper's folder."""
-    folder = _urdf_folder(name_or_path)
-    if folder is not None:
-        return load_urdf_gripper(folder)
-    path = Path(name_or_path)
-    if not path.suffix:
-        path = CONFIG_DIR / f"{name_or_path}.toml"
-    if not path.is_file():
-        raise ValueError(f"unknown gripper {name_or_path!r}; known: {', '.join(list_grippers())}")
-    with path.open("rb") as fh:
+    """A gripper by name (NAME.toml or a URDF gripper's folder NAME/, in GRASPSCAPE_GRIPPER_PATH
+    then the shipped configs/grippers), by path to a TOML spec, or by path to a URDF gripper's
+    folder."""
+    found = find_gripper(name_or_path)
+    if found is None:
+        raise ValueError(unknown_gripper_message(name_or_path))
+    if found.is_dir():
+        return load_urdf_gripper(found)
+    with found.open("rb") as fh:
         return GripperSpec.model_validate(tomllib.load(fh))
 
 
 def list_grippers() -> list[str]:
-    boxes = [p.stem for p in CONFIG_DIR.glob("*.toml")]
-    urdfs = [p.parent.name for p in CONFIG_DIR.glob(f"*/{URDF_DESCRIPTION}")]
-    return sorted(boxes + urdfs)
+    """The names of the grippers found in `gripper_dirs()`."""
+    names: set[str] = set()
+    for directory in gripper_dirs():
+        names.update(p.stem for p in directory.glob("*.toml"))
+        names.update(p.parent.name for p in directory.glob(f"*/{URDF_DESCRIPTION}"))
+    return sorted(names)

@@ -6,6 +6,8 @@ import argparse
 import os
 from pathlib import Path
 
+from graspscape.shared import cli_args
+
 
 def _password(args: argparse.Namespace) -> str | None:
     """--zenoh-password-file (its first line), else GRASPSCAPE_ZENOH__PASSWORD; empty: none."""
@@ -46,7 +48,7 @@ def register_worker(subparsers: argparse._SubParsersAction) -> None:
         help="coordinator or zenoh router endpoint, e.g. tcp/10.0.0.5:7447 (repeatable; "
         "default tcp/127.0.0.1:7447)",
     )
-    worker.add_argument("--procs", type=int, help="simulation processes (default: cores)")
+    cli_args.add_procs(worker, "simulation processes (default: cores)")
     worker.add_argument("--name", help="worker name; process ids are <name>-p<i>-<pid>")
     worker.add_argument("--cache-dir", type=Path,
                         help="object cache (default: GRASPSCAPE_CACHE_DIR or ~/.cache/graspscape)")
@@ -67,5 +69,6 @@ def register_worker(subparsers: argparse._SubParsersAction) -> None:
                         help="file whose first line is the zenoh password (default: "
                         "GRASPSCAPE_ZENOH__PASSWORD; none: no login)")
     worker.add_argument("--log-level", default="info",
-                        choices=["critical", "error", "warning", "info", "debug"])
+                        choices=["critical", "error", "warning", "info", "debug"],
+                        help="log messages from this level up (default info)")
     worker.set_defaults(handler=_worker)

@@ -22,6 +22,7 @@ import math
 import time
 from pathlib import Path
 
+from graspscape.shared import cli_args
 from graspscape.shared.specs.gripper import GripperSpec, load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
@@ -265,7 +266,7 @@ def _run(args: argparse.Namespace) -> int:
     settings = (SimSettings.model_validate_json(args.settings.read_text())
                 if args.settings else SimSettings())
     rows = []
-    for name in args.objects:
+    for name in args.objects or args.objects_flag or BUILTIN_OBJECTS:
         rows.append(compare_object(name, args.grid, gripper=load_gripper(args.gripper),
                                    settings=settings, min_effort=args.min_effort,
                                    log=lambda msg: print(msg, file=sys.stderr, flush=True)))
@@ -279,10 +280,12 @@ def register_compare(subparsers: argparse._SubParsersAction) -> None:
     cp = subparsers.add_parser(
         "compare-policies",
         help="run G_c and G_s over the same pose grid; viable-set volumes, best μ, containment")
-    cp.add_argument("--objects", nargs="+", default=list(BUILTIN_OBJECTS),
+    cp.add_argument("objects", nargs="*", metavar="object",
                     help="object names (default: every built-in)")
-    cp.add_argument("--grid", choices=sorted(GRIDS), default="small")
-    cp.add_argument("--gripper", default="robotiq_3f")
+    cli_args.add_hidden_alias(cp, "--objects", "objects_flag", nargs="+")
+    cp.add_argument("--grid", choices=sorted(GRIDS), default="small",
+                    help="which pose grid (default small)")
+    cli_args.add_gripper(cp, default="robotiq_3f")
     cp.add_argument("--settings", type=Path, help="JSON file of SimSettings overrides")
     cp.add_argument("--min-effort", action="store_true",
                     help="also bisect the minimum closing effort of each best-μs pose")

@@ -48,9 +48,10 @@ def _columns(chunk: Chunk) -> dict[str, Any]:
     }
 
 
-def write_acronym(session: Session, exploration_id: int, out: BinaryIO) -> int:
+def write_acronym(session: Session, exploration_id: int, out: BinaryIO,
+                  object_file: str | None = None) -> int:
     """Writes the exploration's poses to `out` (a seekable binary file); returns the rows."""
-    source = dataset_source(session, exploration_id)
+    source = dataset_source(session, exploration_id, object_file)
     mesh = exploration_mesh(session, exploration_id)
     n = 0
     with h5py.File(out, "w") as file:

@@ -14,10 +14,13 @@ from graspscape.services.coordinator.datasets.rows import exploration_mesh
 from graspscape.services.coordinator.errors import Conflict
 from sqlalchemy.orm import Session
 
-Writer = Callable[[Session, int, BinaryIO], int]
+# (session, exploration id, out, object_file=None) -> rows; object_file: the name of the mesh
+# written beside the dataset, which its `object.file` names.
+Writer = Callable[..., int]
 
 
-def write_object_mesh(session: Session, exploration_id: int, out: BinaryIO) -> int:
+def write_object_mesh(session: Session, exploration_id: int, out: BinaryIO,
+                      object_file: str | None = None) -> int:
     """The object's mesh in its centre-of-mass frame as OBJ; returns its faces."""
     mesh = exploration_mesh(session, exploration_id)
     if mesh is None:

@@ -21,9 +21,10 @@ def _flags(values: bytearray) -> str:
     return "[" + ",".join("true" if v else "false" for v in values) + "]"
 
 
-def write_graspgen(session: Session, exploration_id: int, out: BinaryIO) -> int:
+def write_graspgen(session: Session, exploration_id: int, out: BinaryIO,
+                   object_file: str | None = None) -> int:
     """Writes the exploration's poses to `out`; returns the number of rows."""
-    source = dataset_source(session, exploration_id)
+    source = dataset_source(session, exploration_id, object_file)
     mesh = exploration_mesh(session, exploration_id)
     head = {
         "object": {"file": source.object.file, "scale": source.object.scale,

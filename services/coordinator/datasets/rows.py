@@ -67,7 +67,10 @@ def object_file_name(exploration_id: int) -> str:
     return f"exploration-{exploration_id}-object.obj"
 
 
-def dataset_source(session: Session, exploration_id: int) -> DatasetSource:
+def dataset_source(session: Session, exploration_id: int,
+                   object_file: str | None = None) -> DatasetSource:
+    """Where the dataset comes from; `object_file`: the name under which its writer puts the
+    mesh beside it (default: the download name of GET …/export/object.obj)."""
     row = session.get(ExplorationRow, exploration_id)
     if row is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
@@ -77,7 +80,8 @@ def dataset_source(session: Session, exploration_id: int) -> DatasetSource:
     return DatasetSource(
         exploration_id=exploration_id,
         object=DatasetObject(
-            id=obj.id, file=object_file_name(exploration_id), scale=1.0, source=obj.name,
+            id=obj.id, file=object_file or object_file_name(exploration_id), scale=1.0,
+            source=obj.name,
             source_scale=float(props.get("scale", 1.0)) * METRES_PER[props.get("units") or "m"],
             mass_kg=props.get("mass_kg"), friction=props.get("friction")),
         gripper=str(row.spec["gripper"]),

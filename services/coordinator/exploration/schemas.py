@@ -35,8 +35,13 @@ class Progress(BaseModel):
     poses_total: int
     fraction_done: float
     viable_share: float | None = Field(description="viable / done; null before any pose")
-    throughput_poses_per_s: float = Field(description="over the last throughput window")
-    eta_s: float | None = Field(description="remaining / throughput; null when stalled")
+    throughput_poses_per_s: float = Field(
+        description="poses stored per second over the last throughput window (over the part "
+        "of it since the window's first pose, for a run younger than the window)")
+    eta_s: float | None = Field(
+        description="remaining planned poses / throughput; null when it cannot be estimated "
+        "(fewer than 10 poses in the window, stalled, all planned poses stored) and for a "
+        "finished exploration (done, incomplete, failed, cancelled)")
 
 
 class FailureReason(BaseModel):

@@ -91,6 +91,10 @@ def list_explorations(
     return list(rows), total
 
 
+# Poses within the throughput window before an ETA is given: fewer measure start-up, not a rate.
+MIN_POSES_FOR_ETA = 10
+
+
 def progress(
     session: Session, *, row: ExplorationRow, window_s: float, now: datetime | None = None
 ) -> Progress:
@@ -102,23 +106,24 @@ def progress(
         .group_by(TileRow.state)
     ):
         tiles[state] = count
-    recent = (
-        session.scalar(
-            select(func.count())
-            .select_from(PoseRow)
-            .where(
-                PoseRow.exploration_id == row.id,
-                PoseRow.created_at >= now - timedelta(seconds=window_s),
-            )
+    recent, first = session.execute(
+        select(func.count(), func.min(PoseRow.created_at)).where(
+            PoseRow.exploration_id == row.id,
+            PoseRow.created_at >= now - timedelta(seconds=window_s),
         )
-        or 0
-    )
-    throughput = recent / window_s
+    ).one()
+    # The rate over the part of the window that saw poses: a run younger than the window,
+    # divided by the whole of it, read many times too slow (21 min for a 17 s run).
+    span = window_s if first is None else min(window_s, max(1.0, (now - first).total_seconds()))
+    throughput = recent / span
     remaining = max(0, row.poses_total - row.poses_done)
-    if row.status in FINISHED_STATUSES or remaining == 0:
-        eta: float | None = 0.0
-    else:
-        eta = remaining / throughput if throughput > 0 else None
+    # No ETA for a finished run (nothing is left to wait for), nor for a running one with
+    # all its planned poses stored (refinement decides what comes next), nor before enough
+    # poses came in to measure a rate.
+    eta: float | None = None
+    if (row.status not in FINISHED_STATUSES and remaining > 0
+            and recent >= MIN_POSES_FOR_ETA and throughput > 0):
+        eta = remaining / throughput
     return Progress(
         tiles=tiles,
         poses_done=row.poses_done,

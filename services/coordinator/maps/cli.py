@@ -20,6 +20,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from graspscape.shared import cli_args
+
 # The grasp datasets' names (services/coordinator/datasets/formats.py, which imports h5py:
 # loaded only when one is written).
 DATASETS = ("graspgen.json", "acronym.h5", "object.obj")
@@ -32,41 +34,51 @@ def register(subparsers: Any) -> Any:
     sub = parser.add_subparsers(dest="map_command", required=True, metavar="ACTION")
 
     show = sub.add_parser("show", help="write the map picture of an exploration")
-    show.add_argument("exploration_id", type=int)
+    cli_args.add_exploration_id(show)
     show.add_argument("-o", "--out", type=Path, default=Path("map.png"),
                       help="PNG or SVG by suffix (default map.png)")
     picture_args(show)
-    show.add_argument("--database-url", default=None)
+    cli_args.add_store(show)
     show.set_defaults(handler=_show)
 
     exp = sub.add_parser("export", help="export poses (CSV, Parquet), the manifold table or a "
                          "grasp dataset (GraspGen JSON, ACRONYM-style HDF5)")
-    exp.add_argument("exploration_id", type=int)
+    cli_args.add_exploration_id(exp)
     exp.add_argument("--what", choices=["poses.csv", "poses.parquet", "manifolds.json",
-                                        *DATASETS], default="poses.csv")
-    exp.add_argument("-o", "--out", type=Path, required=True)
-    exp.add_argument("--database-url", default=None)
+                                        *DATASETS], default="poses.csv",
+                     help="which export (default poses.csv); a dataset (graspgen.json, "
+                     "acronym.h5) is written with the mesh it names beside it")
+    exp.add_argument("-o", "--out", type=Path, required=True, help="file to write")
+    cli_args.add_store(exp)
     exp.set_defaults(handler=_export)
 
     return sub
 
 
 def picture_args(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--cut", choices=["horizontal", "vertical"], default="horizontal")
-    parser.add_argument("--phi0", type=float, default=0.0, help="vertical cut azimuth, degrees")
-    parser.add_argument("--attitude", type=int, default=0, help="attitude index of the cut")
+    parser.add_argument("--cut", choices=["horizontal", "vertical"], default="horizontal",
+                        help="plane of the map's cut (default horizontal)")
+    parser.add_argument("--phi0", type=cli_args.degrees(-360, 360), default=0.0, metavar="DEG",
+                        help="azimuth of a vertical cut, degrees (default 0)")
+    parser.add_argument("--attitude", type=cli_args.bounded("(attitude index)", 0, 1000,
+                                                            integer=True), default=0,
+                        help="attitude index of the cut (default 0)")
     parser.add_argument("--r-mm", type=float, default=None,
                         help="draw only the cut's band at this r, mm (default: every r)")
 
 
-def _sessions(url: str | None) -> Any:
+def _sessions(args: argparse.Namespace) -> Any:
+    """The coordinator's database as --database-url, --data-dir or the settings name it; one
+    that does not exist is refused (a read creates nothing), naming what makes one."""
     from graspscape.services.coordinator import db
+    from graspscape.services.coordinator.settings import DatabaseSettings, get_settings
 
+    url = args.database_url
+    if url is None and args.data_dir is not None:
+        url = DatabaseSettings(data_dir=args.data_dir).resolved_url
     if url is None:
-        from graspscape.services.coordinator.settings import get_settings
-
         url = get_settings().database.resolved_url
-    return db.make_sessionmaker(db.make_engine(url))
+    return db.make_sessionmaker(db.open_existing(url))
 
 
 def write_picture(sessions: Any, exploration_id: int, args: argparse.Namespace) -> None:
@@ -87,22 +99,40 @@ def write_picture(sessions: Any, exploration_id: int, args: argparse.Namespace) 
 
 
 def _show(args: argparse.Namespace) -> int:
-    write_picture(_sessions(args.database_url), args.exploration_id, args)
+    write_picture(_sessions(args), args.exploration_id, args)
     return 0
 
 
-def _export_dataset(args: argparse.Namespace) -> int:
-    from graspscape.services.coordinator.datasets.formats import FORMATS
-
-    # Written beside the target and renamed at the end: a refusal halfway leaves no torn file.
-    part = args.out.with_name(args.out.name + ".part")
+def _write_atomically(path: Path, write: Any) -> int:
+    """`write(file)` into PATH.part, renamed at the end: a refusal halfway leaves no torn
+    file."""
+    part = path.with_name(path.name + ".part")
     try:
-        with _sessions(args.database_url)() as session, part.open("w+b") as out:  # h5py reads back
-            rows = FORMATS[args.what].write(session, args.exploration_id, out)
+        with part.open("w+b") as out:  # h5py reads back
+            rows = write(out)
     except BaseException:
         part.unlink(missing_ok=True)
         raise
-    part.replace(args.out)
+    part.replace(path)
+    return int(rows)
+
+
+def _export_dataset(args: argparse.Namespace) -> int:
+    """A dataset and, beside it, the object's mesh under the name its `object.file` gives
+    (the download name of the REST export), so that it loads unchanged."""
+    from graspscape.services.coordinator.datasets.formats import FORMATS
+    from graspscape.services.coordinator.datasets.rows import object_file_name
+
+    eid = args.exploration_id
+    mesh_name = object_file_name(eid)
+    with _sessions(args)() as session:
+        rows = _write_atomically(args.out, lambda out: FORMATS[args.what].write(
+            session, eid, out, object_file=mesh_name))
+        if args.what != "object.obj":
+            mesh = args.out.with_name(mesh_name)
+            faces = _write_atomically(mesh, lambda out: FORMATS["object.obj"].write(
+                session, eid, out))
+            print(f"{mesh}: {faces} faces")
     print(f"{args.out}: {rows} {'faces' if args.what == 'object.obj' else 'poses'}")
     return 0
 
@@ -116,7 +146,7 @@ def _export(args: argparse.Namespace) -> int:
         stored_manifolds,
     )
 
-    sessions = _sessions(args.database_url)
+    sessions = _sessions(args)
     with sessions() as session:
         ensure_manifolds(session, args.exploration_id)
         if args.what == "manifolds.json":  # as GET …/export/manifolds.json

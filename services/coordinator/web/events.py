@@ -96,7 +96,7 @@ def snapshot(session: Session, *, window_s: float) -> Snapshot:
         if row.status in FINISHED_STATUSES:
             fraction = min(1.0, row.poses_done / row.poses_total) if row.poses_total else 1.0
             viable = row.viable_count / row.poses_done if row.poses_done else None
-            throughput, eta = 0.0, 0.0
+            throughput, eta = 0.0, None  # nothing left to wait for: no ETA
         else:
             p = service.progress(session, row=row, window_s=window_s)
             fraction, viable = p.fraction_done, p.viable_share

@@ -74,3 +74,18 @@ def test_3d_data_carries_the_exported_mesh(sqlite_sessions: sessionmaker[Session
     text = (tmp_path / "view3d-data.js").read_text()
     assert "</script>" not in text
     assert read_data(tmp_path / "view3d-data.js")["obj"] == obj
+
+
+def test_the_sites_graspgen_names_the_mesh_beside_it(sqlite_sessions: sessionmaker[Session],
+                                                     tmp_path: Path) -> None:
+    import trimesh
+    from graspscape.services.local.atlas_site import _write_exports
+
+    eid = oracle_sphere(sqlite_sessions, dtheta_deg=90)
+    with sqlite_sessions() as s:
+        written = _write_exports(s, eid, tmp_path)
+    assert {"object.obj", "graspgen.json"} <= set(written)
+    data = json.loads((tmp_path / "graspgen.json").read_text())
+    assert data["object"]["file"] == "object.obj"
+    mesh = trimesh.load(tmp_path / data["object"]["file"], force="mesh")
+    assert len(mesh.faces) > 0 and mesh.is_watertight

@@ -137,13 +137,13 @@ def test_eval_pose_prints_warnings_and_refuses_bad_objects(
 ) -> None:
     pose = ["--theta", "0", "--phi", "0"]
     tube = _file(tmp_path, "tube.stl", meshes.stl_bytes(meshes.open_tube()))
-    assert main(["eval-pose", "--object", tube, "--mass", "0.2", *pose]) == 1
+    assert main(["eval-pose", tube, "--mass", "0.2", *pose]) == 1
     assert "not watertight" in capsys.readouterr().err
     bunny = _file(tmp_path, "bunny_mm.obj", meshes.bunny_in_mm())
-    assert main(["eval-pose", "--object", bunny, "--mass", "0.15", *pose]) == 1
+    assert main(["eval-pose", bunny, "--mass", "0.15", *pose]) == 1
     assert "too large" in capsys.readouterr().err
     two = _file(tmp_path, "two.stl", meshes.stl_bytes(meshes.two_bodies()))
-    assert main(["eval-pose", "--object", two, "--mass", "0.2", "--scale", "0.5", *pose]) == 0
+    assert main(["eval-pose", two, "--mass", "0.2", "--scale", "0.5", *pose]) == 0
     out = capsys.readouterr()
     assert "warning: two: mesh is 2 bodies up to 0.15 m apart" in out.err
     assert '"outcome"' in out.out

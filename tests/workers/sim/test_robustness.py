@@ -251,7 +251,7 @@ def test_eval_pose_command_prints_the_report(sim_cache, monkeypatch, capsys):
     monkeypatch.setattr(evaluate_module, "_EVALUATORS", made)
     monkeypatch.setenv("GRASPSCAPE_CACHE_DIR", str(sim_cache))
     try:
-        assert main(["eval-pose", "--object", "sphere", "--theta", "0.3", "--phi", "0",
+        assert main(["eval-pose", "sphere", "--theta", "17.19", "--phi", "0",
                      "--robustness", "tug,shake"]) == 0
     finally:
         for evaluator in made.values():

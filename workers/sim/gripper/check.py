@@ -28,6 +28,7 @@ from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.bullet import get_closest_points, get_joint_info
 from graspscape.workers.sim.geometry import quat_from_matrix
+from graspscape.workers.sim.gripper.check_explain import why_no_hold, zero_quality_warnings
 from graspscape.workers.sim.gripper.hand import Hand
 from graspscape.workers.sim.objects import prepare_object
 from graspscape.workers.sim.render import render_scene
@@ -80,6 +81,8 @@ class CheckReport(BaseModel):
     trials: list[Trial]
     pictures: list[str]
     problems: list[str]
+    warnings: list[str] = Field(default_factory=list, description="not faults, but worth a "
+                                "look: held grasps with μs ≈ 0")
 
 
 def _digit(link: str) -> str:
@@ -277,7 +280,9 @@ def check_gripper(spec: AnyGripperSpec, cache: Path, out_dir: Path | None = None
         problems.append(f"declared reach {declared * 1000:.0f} mm, measured "
                         f"{found['reach'] * 1000:.0f} mm: set reach_m = {found['reach']:.3f}")
     if not any(t.viable for t in trials if t.object == "sphere"):
-        problems.append("held the sphere from none of the start poses tried")
+        why = why_no_hold("sphere", trials, found["travel"], found["digits"])
+        problems.append("held the sphere from none of the start poses tried"
+                        + (": " + "; ".join(why) if why else ""))
     if out_dir:
         found["pictures"] += [str(p_) for p_ in sorted(out_dir.glob("sphere_*.png"))
                               + sorted(out_dir.glob("cube_*.png"))]
@@ -286,4 +291,4 @@ def check_gripper(spec: AnyGripperSpec, cache: Path, out_dir: Path | None = None
         mass_kg=found["mass"], digits=found["digits"], vendor_names=found["vendor"],
         reach_m=found["reach"], declared_reach_m=declared, opening_m=found["opening"],
         closed_gap_m=found["closed_gap"], joints=found["travel"], trials=trials,
-        pictures=found["pictures"], problems=problems)
+        pictures=found["pictures"], problems=problems, warnings=zero_quality_warnings(trials))

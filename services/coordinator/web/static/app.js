@@ -6,10 +6,6 @@ import { TAB10, labelName } from "./palette.js";
 const main = document.getElementById("main");
 const live = document.getElementById("live");
 
-const KNOWN_MANIFOLD_FIELDS = new Set(["label", "name", "description", "digits", "pose_count",
-  "evaluated_count", "volume_cm3", "mu_s_min", "mu_s_mean", "mu_s_max", "mu_s_std", "best",
-  "local_maxima"]);
-
 let snapshot = null;            // the last progress event
 const listeners = new Set();    // views that redraw on a progress event
 let choices = null;
@@ -97,8 +93,17 @@ function progressRow(e) {
       "aria-label": `exploration ${e.id}: ${pct(e.fraction_done)} done` })),
     el("td", { class: "num", "data-field": "poses_done" }, done),
     el("td", { class: "num" }, pct(e.viable_share)),
-    el("td", { class: "num" }, fmt(e.throughput_poses_per_s, 2)),
-    el("td", { class: "num" }, duration(e.eta_s)));
+    el("td", { class: "num" }, running(e) ? fmt(e.throughput_poses_per_s, 2) : "–"),
+    el("td", { class: "num", "data-field": "eta" }, eta(e)));
+}
+
+// A rate and an ETA mean something only while poses come in; the server gives no ETA
+// until it can estimate one (eta_s null), nor for a finished run.
+function running(e) { return e.status === "running" || e.status === "queued"; }
+
+function eta(e) {
+  if (!running(e)) return "–";
+  return e.eta_s === null || e.eta_s === undefined ? "estimating…" : duration(e.eta_s);
 }
 
 function viewList() {
@@ -108,7 +113,7 @@ function viewList() {
     el("caption", { class: "note", style: "text-align:left" },
       "Newest first; numbers update live."),
     el("thead", {}, el("tr", {}, ["Id", "Label / object", "Strategy", "Status", "Progress",
-      "Poses done / planned", "Viable", "Poses/s", "ETA"].map((h, i) =>
+      "Poses done / planned", "Viable share", "Poses per second", "Time left"].map((h, i) =>
       el("th", { scope: "col", class: i >= 5 ? "num" : null }, h)))),
     body);
   main.replaceChildren(el("h2", {}, "Explorations"), summary, table);
@@ -127,30 +132,51 @@ function viewList() {
 
 // ---- one exploration -------------------------------------------------------------------
 function facts(detail, p) {
+  const live = running(detail);
   return el("ul", { class: "facts", "data-testid": "facts" },
     el("li", {}, "status ", el("b", { class: `status-${detail.status}` }, detail.status)),
     el("li", {}, "poses ", el("b", { "data-field": "poses_done" },
       `${fmt(p.poses_done)} / ${fmt(p.poses_total)}`)),
     el("li", {}, "viable ", el("b", {}, pct(p.viable_share))),
-    el("li", {}, "poses/s ", el("b", {}, fmt(p.throughput_poses_per_s, 2))),
-    el("li", {}, "ETA ", el("b", {}, duration(p.eta_s))),
+    live ? el("li", {}, "poses per second ", el("b", {}, fmt(p.throughput_poses_per_s, 2))) : null,
+    live ? el("li", { "data-field": "eta" }, "time left ",
+      el("b", {}, eta({ status: detail.status, eta_s: p.eta_s }))) : null,
     el("li", {}, "gripper ", el("b", {}, detail.spec.gripper)),
     el("li", {}, "policy ", el("b", {}, detail.spec.settings.policy_name)),
     el("li", {}, "strategy ", el("b", {}, detail.spec.strategy.name)));
 }
 
+// The grasp panel: what a person reads first, each with its unit; every stored field
+// behind a toggle.
+const deg = (v) => (typeof v === "number" ? `${(v * 180 / Math.PI).toFixed(1)}°` : "–");
+const CURATED = [
+  ["outcome", "Outcome", (p) => p.outcome],
+  ["mu_s", "μs (grasp quality)", (p) => fmt(p.mu_s)],
+  ["robust_label", "Robustness", (p) => p.robust_label || "–"],
+  ["robust_s", "Robust success s_δ", (p) => fmt(p.robust_s, 2)],
+  ["approach", "Approach θ, φ", (p) => `${deg(p.theta)}, ${deg(p.phi)}`],
+  ["r", "Start gap", (p) => (typeof p.r === "number" ? `${(p.r * 1000).toFixed(0)} mm` : "–")],
+  ["roll", "Roll", (p) => deg(p.roll)],
+  ["effort_max_nm", "Largest joint effort", (p) => `${fmt(p.effort_max_nm, 2)} N·m`],
+  ["torque_margin_ratio", "Torque margin", (p) => pct(p.torque_margin_ratio)],
+  ["pose", "Pose", (p) => `#${p.id}`],
+];
+
 function poseNumbers(pose) {
-  const rows = [];
-  const skip = new Set(["contacts_per_link", "signature", "grasp", "created_at", "tile_id"]);
+  const curated = [];
+  for (const [key, name, value] of CURATED) {
+    curated.push(el("dt", {}, name), el("dd", { "data-field": key }, value(pose)));
+  }
+  const raw = [];
+  const skip = new Set(["contacts_per_link", "signature", "grasp"]);
   for (const [k, v] of Object.entries(pose)) {
     if (skip.has(k) || (v !== null && typeof v === "object")) continue;
-    let shown = v;
-    if (["theta", "phi", "roll", "pitch", "yaw"].includes(k) && typeof v === "number") {
-      shown = `${(v * 180 / Math.PI).toFixed(1)}°`;
-    }
-    rows.push(el("dt", {}, k), el("dd", { "data-field": k }, fmt(shown)));
+    raw.push(el("dt", {}, k), el("dd", { "data-raw": k }, fmt(v)));
   }
-  return el("dl", { class: "numbers" }, rows);
+  return el("div", {},
+    el("dl", { class: "numbers", "data-testid": "grasp-numbers" }, curated),
+    el("details", { class: "raw", "data-testid": "raw-fields" },
+      el("summary", {}, "All stored fields"), el("dl", { class: "numbers" }, raw)));
 }
 
 async function showGrasp(id, pose, box, title) {
@@ -166,7 +192,8 @@ async function showGrasp(id, pose, box, title) {
     picture.addEventListener("load", () => { picture.dataset.loaded = "1"; });
   }
   box.replaceChildren(heading, el("div", { class: "grasp" }, picture, poseNumbers(pose)));
-  heading.focus();
+  heading.focus({ preventScroll: true });
+  box.scrollIntoView({ block: "nearest" });
 }
 
 async function showBest(id, manifold, box) {
@@ -180,40 +207,66 @@ async function showBest(id, manifold, box) {
   }
 }
 
-function manifoldTable(id, list, box) {
-  const ms = list.manifolds;
-  const extra = [];
-  for (const m of ms) {
-    for (const [k, v] of Object.entries(m)) {
-      if (!KNOWN_MANIFOLD_FIELDS.has(k) && !extra.includes(k) && (v === null || typeof v !== "object")) extra.push(k);
-    }
-  }
-  const head = ["Manifold", "Description", "Poses", "Volume cm³", ...extra, "μs min", "μs mean",
-    "μs max", "μs std", ""];
-  const rows = ms.map((m) => el("tr", { "data-manifold": m.name },
-    el("th", { scope: "row" }, el("span", { class: "swatch", style: `background:${TAB10[m.label % 10]}` }), m.name),
-    el("td", {}, m.description),
+// The manifold table: the large manifolds (≥ 1 % of the viable volume) a row each, the
+// dust (the smaller ones) as one row that opens onto theirs.
+const MANIFOLD_COLUMNS = [
+  ["Manifold", null], ["Grasp type", null], ["Poses", "num"], ["Volume, cm³", "num"],
+  ["Robust core, cm³", "num"], ["Mean μs", "num"], ["Best μs", "num"], ["", null]];
+
+function manifoldRow(id, m, box, dust) {
+  const pick = (ev) => {
+    for (const tr of ev.target.closest("tbody").children) tr.classList.remove("selected");
+    ev.target.closest("tr").classList.add("selected");
+    showBest(id, m.name, box);
+  };
+  return el("tr", { "data-manifold": m.name, class: dust ? "dust" : null, hidden: dust },
+    el("th", { scope: "row" }, el("span", { class: "swatch",
+      style: `background:${TAB10[m.label % 10]}` }), m.name),
+    // The digits in contact; where they touch, in the tooltip (a line of numbers per digit).
+    el("td", { title: m.description }, m.description.split(" — ")[0]),
     el("td", { class: "num" }, fmt(m.pose_count)),
     el("td", { class: "num" }, fmt(m.volume_cm3, 1)),
-    extra.map((k) => el("td", { class: typeof m[k] === "number" ? "num" : null }, fmt(m[k]))),
-    el("td", { class: "num" }, fmt(m.mu_s_min)),
+    el("td", { class: "num" }, m.core_volume_cm3 === null || m.core_volume_cm3 === undefined
+      ? "–" : fmt(m.core_volume_cm3, 1)),
     el("td", { class: "num" }, fmt(m.mu_s_mean)),
     el("td", { class: "num" }, fmt(m.mu_s_max)),
-    el("td", { class: "num" }, fmt(m.mu_s_std)),
     el("td", {}, el("button", { type: "button", class: "secondary",
-      "data-testid": `best-${m.name}`,
-      onclick: (ev) => {
-        for (const tr of ev.target.closest("tbody").children) tr.classList.remove("selected");
-        ev.target.closest("tr").classList.add("selected");
-        showBest(id, m.name, box);
-      } }, `Best grasp of ${m.name}`))));
-  const others = Object.entries(list).filter(([k, v]) =>
-    !["exploration_id", "final", "manifolds"].includes(k) && v !== null && v !== undefined);
+      "data-testid": `best-${m.name}`, "aria-label": `best grasp of ${m.name}`,
+      onclick: pick }, "Best grasp")));
+}
+
+function dustRow(list, dustRows) {
+  const d = list.dust;
+  const toggle = el("button", { type: "button", class: "secondary", "aria-expanded": "false",
+    "data-testid": "dust-toggle" }, "Show them");
+  toggle.addEventListener("click", () => {
+    const open = toggle.getAttribute("aria-expanded") !== "true";
+    toggle.setAttribute("aria-expanded", String(open));
+    toggle.textContent = open ? "Hide them" : "Show them";
+    for (const tr of dustRows) tr.hidden = !open;
+  });
+  return el("tr", { "data-testid": "dust" },
+    el("th", { scope: "row" }, "Dust"),
+    el("td", {}, `${fmt(d.manifolds)} smaller manifolds (each under 1 % of the viable volume)`),
+    el("td", { class: "num" }, fmt(d.poses)),
+    el("td", { class: "num" }, fmt(d.volume_cm3, 1)),
+    el("td", { colspan: 3 }),
+    el("td", {}, toggle));
+}
+
+function manifoldTable(id, list, box) {
+  const large = list.manifolds.filter((m) => m.large !== false);
+  const dust = list.manifolds.filter((m) => m.large === false);
+  const dustRows = dust.map((m) => manifoldRow(id, m, box, true));
+  const rows = large.map((m) => manifoldRow(id, m, box, false));
+  if (dust.length && list.dust) rows.push(dustRow(list, dustRows), ...dustRows);
   return el("div", {},
-    el("p", { class: "note" }, `${ms.length} manifold(s)${list.final ? "" : " so far (running)"}` +
-      (others.length ? "; " + others.map(([k, v]) => `${k}: ${fmt(v)}`).join("; ") : "")),
+    el("p", { class: "note" }, `${large.length} large manifold(s)` +
+      (dust.length ? ` and ${dust.length} smaller ones` : "") +
+      (list.final ? "" : " so far (running)")),
     el("div", { style: "overflow-x:auto" }, el("table", { "data-testid": "manifolds" },
-      el("thead", {}, el("tr", {}, head.map((h) => el("th", { scope: "col" }, h)))),
+      el("thead", {}, el("tr", {}, MANIFOLD_COLUMNS.map(([h, cls]) =>
+        el("th", { scope: "col", class: cls }, h)))),
       el("tbody", {}, rows))));
 }
 
@@ -248,12 +301,14 @@ async function viewExploration(id) {
       (rCut.value !== "" ? `&r_mm=${rCut.value}` : "") + `&v=${detail.poses_done}`;
   };
   const controls = el("form", { class: "controls", onsubmit: (e) => { e.preventDefault(); drawMap(); } },
-    el("label", {}, "Cut", cut), el("label", {}, "φ0 (vertical cut), °", phi0),
-    el("label", {}, `Attitude (0–${attitudes - 1})`, attitude),
-    el("label", {}, "r", rCut),
+    el("label", {}, "Cut", cut), el("label", {}, "φ0 of a vertical cut, °", phi0),
+    attitudes > 1 ? el("label", {}, `Attitude, index 0–${attitudes - 1}`, attitude) : null,
+    el("label", {}, "Start gap r", rCut),
     el("button", { type: "submit" }, "Draw"));
   for (const c of [cut, attitude, rCut]) c.addEventListener("change", drawMap);
-  const graspBox = el("section", { "aria-live": "polite", "data-testid": "grasp" },
+  const graspBox = el("section", { class: "panel grasp-panel", "aria-live": "polite",
+    "aria-label": "chosen grasp", "data-testid": "grasp" },
+    el("h3", {}, "Chosen grasp"),
     el("p", { class: "note" }, "Choose a manifold (or click a point in the 3D view) to see its grasp."));
   const tableBox = el("div", {}, el("p", {}, "Loading manifolds…"));
   const canvasBox = el("div", {}, el("canvas", { id: "view3d", tabindex: "0",
@@ -263,13 +318,19 @@ async function viewExploration(id) {
     ["poses.csv", "poses.parquet", "manifolds.json", "object.obj", "graspgen.json", "acronym.h5"].map(
       (n) => el("a", { href: `/explorations/${id}/export/${n}`, download: true }, n)),
     el("a", { href: `/explorations/${id}/map.svg` }, "map.svg"));
+  // Two columns: the map and the manifold table on the left; the chosen grasp and the 3D
+  // view on the right, kept in view while the table scrolls.
   main.replaceChildren(
     el("h2", {}, `Exploration #${id}`, detail.spec.label ? ` — ${detail.spec.label}` : ""),
     factsBox,
     el("div", { class: "grid" },
-      el("section", { class: "panel map", "aria-label": "map" }, el("h3", {}, "Behavioral map"), controls, img),
-      el("section", { class: "panel", "aria-label": "3D view" }, el("h3", {}, "Approach directions"), canvasBox, legend)),
-    el("h3", {}, "Manifolds"), tableBox, graspBox, exportLinks);
+      el("div", { class: "column" },
+        el("section", { class: "panel map", "aria-label": "map" }, el("h3", {}, "Behavioral map"), controls, img),
+        el("section", { "aria-label": "manifolds" }, el("h3", {}, "Manifolds"), tableBox)),
+      el("aside", { class: "column side", "data-testid": "side" },
+        graspBox,
+        el("section", { class: "panel", "aria-label": "3D view" }, el("h3", {}, "Approach directions"), canvasBox, legend))),
+    exportLinks);
   drawMap();
   const loadTable = async () => {
     try {

@@ -14,7 +14,7 @@ from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.services.coordinator.store.workers import heartbeat
 from graspscape.shared.specs.exploration import PoseGridSpec
 from graspscape.shared.specs.results import Outcome, PoseResult
-from sqlalchemy import update
+from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from tests.factories import fake_results
@@ -57,22 +57,27 @@ def test_submit_get_and_progress(
     assert detail["progress"]["viable_share"] is None and detail["progress"]["eta_s"] is None
 
     results = work(sessions, 2)
+    while len(results) < 10:  # enough to estimate
+        results += work(sessions, 1)
     detail = client.get(f"/explorations/{eid}").json()
     progress = detail["progress"]
     assert detail["status"] == "running"
-    assert progress["tiles"]["done"] == 2
-    assert progress["tiles"]["queued"] == created["tiles_total"] - 2
+    tiles_done = progress["tiles"]["done"]
+    assert tiles_done >= 2
+    assert progress["tiles"]["queued"] == created["tiles_total"] - tiles_done
     assert progress["poses_done"] == len(results) == detail["poses_done"]
     assert progress["viable_share"] == pytest.approx(sum(r.viable for r in results) / len(results))
-    assert progress["throughput_poses_per_s"] == pytest.approx(len(results) / 60.0)
+    # Stored within the last second: the rate over that second, not diluted over the whole
+    # 60 s window.
+    assert progress["throughput_poses_per_s"] == pytest.approx(len(results), rel=0.5)
     remaining = created["poses_total"] - len(results)
-    assert progress["eta_s"] == pytest.approx(remaining / (len(results) / 60.0))
+    assert progress["eta_s"] == pytest.approx(remaining / progress["throughput_poses_per_s"])
     assert progress["fraction_done"] == pytest.approx(len(results) / created["poses_total"])
 
     work(sessions, 10_000)
     detail = client.get(f"/explorations/{eid}").json()
     assert detail["status"] == "done" and detail["finished_at"] is not None
-    assert detail["progress"]["fraction_done"] == 1.0 and detail["progress"]["eta_s"] == 0.0
+    assert detail["progress"]["fraction_done"] == 1.0 and detail["progress"]["eta_s"] is None
 
 
 def test_list_filters_and_pagination(client: TestClient, object_id: int) -> None:
@@ -423,7 +428,7 @@ def test_failed_tiles_leave_an_exploration_incomplete_with_reasons_until_retried
     # Two tiles' poses were never stored: this used to read "done".
     assert detail["status"] == "incomplete" and detail["finished_at"] is not None
     assert detail["poses_done"] == len(results) < detail["poses_total"]
-    assert detail["progress"]["tiles"]["failed"] == 2 and detail["progress"]["eta_s"] == 0.0
+    assert detail["progress"]["tiles"]["failed"] == 2 and detail["progress"]["eta_s"] is None
     assert detail["failures"] == {"tiles": 2, "poses_with_errors": 0, "reasons": [
         {"reason": "w8: lease expired on attempt 3 of 3", "tiles": 1},
         {"reason": "w9: RuntimeError: pybullet exploded", "tiles": 1},
@@ -499,7 +504,7 @@ def test_exploration_and_tile_ids_are_never_reused_after_delete(
     client: TestClient, object_id: int, sessions: sessionmaker[Session]
 ) -> None:
     from graspscape.services.coordinator.store.models import TileRow
-    from sqlalchemy import func, select
+    from sqlalchemy import func
 
     submit(client, object_id)
     newest = submit(client, object_id)["id"]

@@ -208,6 +208,38 @@ def test_cli_writes_what_the_route_serves(explored: Explored, tmp_path: Path) ->
     assert not list(tmp_path.glob("*.part"))
 
 
+@pytest.mark.parametrize("what", ["graspgen.json", "acronym.h5"])
+def test_a_cli_export_loads_with_the_mesh_it_names(explored: Explored, tmp_path: Path,
+                                                   what: str) -> None:
+    """The round trip a user of the dataset makes: read the file, open the mesh its
+    object.file names beside it, and find the object the transforms are about."""
+    import trimesh
+
+    out = tmp_path / "out" / what
+    out.parent.mkdir()
+    assert main(["map", "export", str(explored.id), "--what", what, "-o", str(out),
+                 "--database-url", explored.url]) == 0
+    if what == "graspgen.json":
+        data = json.loads(out.read_text())
+        named, scale = data["object"]["file"], data["object"]["scale"]
+        n = len(data["grasps"]["transforms"])
+    else:
+        with h5py.File(out, "r") as f:
+            named, scale = f["object/file"][()].decode(), float(f["object/scale"][()])
+            n = len(f["grasps/transforms"])
+            stored = np.asarray(f["object/mesh/vertices"])
+    mesh = trimesh.load(out.parent / named, force="mesh")
+    with explored.sessions() as s:
+        expected = object_mesh(s, s.get(ExplorationRow, explored.id).object_id)
+        poses = s.get(ExplorationRow, explored.id).poses_done
+    assert n == poses and scale == 1.0
+    assert np.allclose(np.sort(mesh.vertices, axis=0), np.sort(expected.vertices, axis=0),
+                       atol=1e-6)
+    if what == "acronym.h5":
+        assert np.allclose(np.sort(stored, axis=0), np.sort(mesh.vertices, axis=0), atol=1e-6)
+    assert sorted(p.name for p in out.parent.iterdir()) == sorted([what, named])
+
+
 def test_refusals(explored: Explored) -> None:
     client = explored.client
     for what in ("graspgen.json", "acronym.h5", "object.obj"):

@@ -36,3 +36,40 @@ def test_explore_maps_an_object_on_this_machine(tmp_path: Path):
     assert re.search(r"^  A: .* N_δ \d+/\d+ known, \d+ held; jitters 0/0 held; "
                      r"not certified: .+$", run.stdout, re.M), run.stdout
     assert "pybullet build time" not in run.stderr
+
+    # The same command again: the stored results, nothing explored again; --new explores.
+    again = subprocess.run(command, capture_output=True, text=True, timeout=240)
+    assert again.returncode == 0, again.stderr
+    n = len(keys)
+    assert again.stdout.strip().splitlines()[-1].startswith(f"done: {n} of {n} poses stored")
+    assert f"exploration {_id(run.stdout)})" in again.stdout
+    new = subprocess.run([*command, "--new"], capture_output=True, text=True, timeout=240)
+    assert new.returncode == 0, new.stderr
+    assert _id(new.stdout) == _id(run.stdout) + 1
+
+
+def _id(stdout: str) -> int:
+    return int(re.search(r"\(exploration (\d+)\)", stdout).group(1))
+
+
+@pytest.mark.slow
+def test_explore_with_a_gripper_of_ones_own(tmp_path: Path):
+    import shutil
+
+    from graspscape.shared.specs.gripper import CONFIG_DIR
+
+    own = tmp_path / "hands" / "my_jaw.toml"
+    own.parent.mkdir()
+    shutil.copy(CONFIG_DIR / "parallel_jaw.toml", own)
+    command = [sys.executable, "-m", "graspscape.services.local.cli", "explore", "sphere",
+               "--gripper", "my_jaw.toml", "--dtheta", "60", "--r-min", "0.02", "--r-max",
+               "0.02", "--levels", "0", "--procs", "1", "--data-dir", str(tmp_path / "d"),
+               "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=240, cwd=own.parent)
+    assert run.returncode == 0, run.stderr
+    assert re.search(r"^done: (\d+) of \1 poses stored", run.stdout, re.M), run.stdout
+    import sqlite3
+
+    with sqlite3.connect(tmp_path / "d" / "coordinator.db") as db:
+        (spec,) = db.execute("select spec from explorations").fetchone()
+    assert json.loads(spec)["gripper"] == str(own)
