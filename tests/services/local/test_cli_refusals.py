@@ -13,7 +13,7 @@ from graspscape.services.local.cli import main
 from graspscape.workers.sim.objects.catalog import ycb_root
 from graspscape.workers.sim.objects.urdf import read_urdf
 
-POSE = ["--theta", "1.57", "--phi", "0"]
+POSE = ["--theta", "90", "--phi", "0"]
 
 
 def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
@@ -24,9 +24,13 @@ def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
 
 
 def test_a_bound_of_the_object_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["eval-pose", "--object", "sphere", "--mass", "0", *POSE]) == 1
-    assert _one_line(capsys) == ("graspscape eval-pose: error: mass_kg: Input should be "
-                                 "greater than 0 (got 0.0)")
+    with pytest.raises(SystemExit) as exited:
+        main(["eval-pose", "sphere", "--mass", "0", *POSE])
+    assert exited.value.code == 2
+    # argparse's usage, then the refusal in one line naming the flag, the range and the unit.
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == "graspscape eval-pose: error: argument --mass: 0 is not in (0, 50] kg"
+    assert not any("validation error" in line for line in err)
 
 
 def test_serve_s_login_refusal_is_one_line(
