@@ -7,7 +7,9 @@ ROOTS = ("shared", "workers", "services")
 
 packages = [f"graspscape.{root}" for root in ROOTS]
 packages += [f"graspscape.{root}.{sub}" for root in ROOTS for sub in find_packages(root)]
-# The viewer's page, script and vendored three.js travel with the package (no CDN, no build).
-package_data = {"graspscape.services.coordinator.web": ["static/*", "static/vendor/*"]}
+# The viewer's page, script and vendored three.js travel with the package (no CDN, no build at
+# install); static/built/ holds the atlas's bundle, built from web/bundle/ (build.mjs).
+package_data = {"graspscape.services.coordinator.web": ["static/*", "static/vendor/*",
+                                                       "static/built/*"]}
 setup(packages=packages, package_dir={f"graspscape.{root}": root for root in ROOTS},
       package_data=package_data)
