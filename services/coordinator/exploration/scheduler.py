@@ -6,7 +6,9 @@ idempotent insert, the tile finished, then the counters), then the exploration's
 poses to evaluate next, and they are planned and queued (exploration/planning.py), all
 before the commit. The counter update takes the exploration row's lock, held to the commit,
 so the batches of one exploration reach their strategy one at a time, each seeing every
-result committed before it. The dispatcher and the in-process run both report through
+result committed before it. After the commit, outside that transaction, the manifold
+keeper (manifolds/keeper.py) brings the exploration's manifold table up to date where it is
+due, for every strategy. The dispatcher and the in-process run both report through
 `ingest_results`; a submission gets its first tiles from `initial_tiles`.
 """
 
@@ -20,6 +22,7 @@ from graspscape.services.coordinator.exploration.specs import stored_spec
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Stage
 from graspscape.services.coordinator.exploration.strategies.registry import strategy_for
 from graspscape.services.coordinator.exploration.tiling import TilePlan
+from graspscape.services.coordinator.manifolds.keeper import KEEPER, Keeper
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.ingest import IngestReport, StoredBatch, store_batch
 from graspscape.services.coordinator.store.models import (
@@ -54,9 +57,11 @@ def ingest_results(
     results: Sequence[PoseResult],
     final: bool = True,
     now: datetime | None = None,
+    keeper: Keeper | None = KEEPER,
 ) -> IngestReport:
     """Store a batch of results of one tile (store/ingest.store_batch: with `final`, the tile
-    is finished once every pose of it is stored), let the strategy react, commit.
+    is finished once every pose of it is stored), let the strategy react, commit; then the
+    `keeper`'s turn, in a transaction of its own (None: the table is left as it is).
 
     Raises what store_batch raises (NotFound, NotLeaseHolder, InvalidInput); a refused batch
     stores nothing."""
@@ -72,6 +77,8 @@ def ingest_results(
     if not stored.committed:
         after_batch(session, stored, results, now)
     session.commit()  # nothing left to commit when the store did
+    if keeper is not None and stored.exploration_status is not None:
+        keeper.keep(session, stored.exploration_id)
     return stored.report
 
 

@@ -37,6 +37,13 @@ class Progress(BaseModel):
     viable_share: float | None = Field(description="viable / done; null before any pose")
     throughput_poses_per_s: float = Field(description="over the last throughput window")
     eta_s: float | None = Field(description="remaining / throughput; null when stalled")
+    manifolds_poses_done: int = Field(
+        default=0, description="the poses the stored manifold table is at (the keeper's "
+        "last refresh); reads serve that table")
+    manifolds_lag_poses: int = Field(
+        default=0, description="poses stored but not yet in the manifold table: at most "
+        "1,000 after a batch while the exploration runs (5,000 while another refresh of it "
+        "runs), 0 once it is finished and the table final")
 
 
 class FailureReason(BaseModel):

@@ -1,5 +1,5 @@
-"""static/built/atlas3d.js (the atlas's 3D view, built by bundle/build.mjs with esbuild) is built from
-the sources as they are now: its header's SHA-256 over its sources is recomputed here, so
+"""static/built/atlas3d.js (the atlas's 3D view, built by bundle/build.mjs with esbuild) is built
+from the sources as they are now: its header's SHA-256 over its sources is recomputed here, so
 editing view3d.js, palette.js, the entry or the vendored three.js without a rebuild fails."""
 
 from __future__ import annotations
