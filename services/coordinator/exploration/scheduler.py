@@ -14,6 +14,7 @@ due, for every strategy. The dispatcher and the in-process run both report throu
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from datetime import datetime
 
@@ -34,6 +35,8 @@ from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.results import PoseResult
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
+
+log = logging.getLogger("graspscape.coordinator.scheduler")
 
 # Tiles of later work, as the scheduler queues them (the coordinator's tile size setting
 # applies to the first tiles of a submission).
@@ -78,7 +81,13 @@ def ingest_results(
         after_batch(session, stored, results, now)
     session.commit()  # nothing left to commit when the store did
     if keeper is not None and stored.exploration_status is not None:
-        keeper.keep(session, stored.exploration_id)
+        try:
+            keeper.keep(session, stored.exploration_id)
+        except Exception:  # the batch is committed: its Ack must not wait on the table
+            # (the lease sweep's catch_up refreshes it later)
+            log.exception("exploration %s: the manifold table was not refreshed",
+                          stored.exploration_id)
+            session.rollback()
     return stored.report
 
 
