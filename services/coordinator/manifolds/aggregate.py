@@ -23,10 +23,10 @@ from fractions import Fraction
 from typing import Any
 
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.exact import ONE, exact, pstdev, sqrt_of, value
 from graspscape.services.coordinator.manifolds.grouping import FineGrid, nearest_known
+from graspscape.services.coordinator.mapspace.lattice import Point
 from scipy.spatial import cKDTree
 
 

@@ -23,11 +23,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.samples import _SAMPLE_COLUMNS, point_or_none
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
+from graspscape.services.coordinator.mapspace.samples import _SAMPLE_COLUMNS, point_or_none
 from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow, PoseRow
 from graspscape.shared.specs.pose import Pose
 from sqlalchemy import bindparam, delete, select, update

@@ -36,7 +36,6 @@ from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
 
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, differs
 from graspscape.services.coordinator.manifolds.robust import (
     ROBUST_MIN,
@@ -47,6 +46,7 @@ from graspscape.services.coordinator.manifolds.robust import (
     score,
 )
 from graspscape.services.coordinator.manifolds.summary import robust_order
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 TOP_SHARE = 0.05  # T2: the dense top 5 % by q_δ
 FOUND_COVER = 0.5  # T3: a matched run manifold covering this share of a dense one finds it

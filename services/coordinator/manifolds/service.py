@@ -22,9 +22,6 @@ from typing import Any
 
 import numpy as np
 from graspscape.services.coordinator.errors import NotFound
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.samples import lattice_of
-from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
@@ -43,6 +40,9 @@ from graspscape.services.coordinator.manifolds.live import (
 from graspscape.services.coordinator.manifolds.robust import RobustScore
 from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.summary import ManifoldMap, ManifoldSummary
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
+from graspscape.services.coordinator.mapspace.samples import lattice_of
+from graspscape.services.coordinator.mapspace.specs import spec_of
 from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
