@@ -103,6 +103,15 @@ def test_only_the_composing_package_is_named_by_no_other_service_module() -> Non
     assert _offenders("services/coordinator", (COMPOSING,)) == []
 
 
+def test_the_map_floors_have_no_package_cycle() -> None:
+    # mapspace/ (the lattice, the stored pose, samples, specs) is the floor below both;
+    # exploration/ (strategies, scheduler) stands on manifolds/ (the map), never the reverse.
+    coordinator = "graspscape.services.coordinator"
+    exploration, manifolds = f"{coordinator}.exploration", f"{coordinator}.manifolds"
+    assert _offenders("services/coordinator/mapspace", (exploration, manifolds)) == []
+    assert _offenders("services/coordinator/manifolds", (exploration,)) == []
+
+
 def _loaded_after_importing(modules: list[str]) -> set[str]:
     code = (
         "import importlib, json, sys\n"
