@@ -130,3 +130,20 @@ def test_the_read_routes_never_write(client: TestClient, object_id: int, session
         assert _marks(s, eid) == before
     progress = client.get(f"/explorations/{eid}").json()["progress"]
     assert progress["manifolds_lag_poses"] == before[0] and progress["manifolds_poses_done"] == 0
+
+
+def test_the_sweep_catches_up_a_table_left_behind(sessions, named_object) -> None:
+    # Stored without the keeper's turn (as after a crash between a batch's commit and its
+    # refresh): the lease sweep's catch_up brings the finished exploration's table final.
+    spec = sphere_grid(named_object, dtheta_deg=30, r_max=0.02, rolls=2)
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=8, max_poses=10**6).id
+        for t in _leased(s):
+            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                           results=[oracle_result(p) for p in t.poses()], keeper=None)
+        done, at, final = _marks(s, eid)
+        assert done > 0 and at is None and not final
+        assert keeper.KEEPER.catch_up(s) >= 1
+        done, at, final = _marks(s, eid)
+        assert final and at == done
+        assert keeper.KEEPER.catch_up(s) == 0  # nothing behind any more
