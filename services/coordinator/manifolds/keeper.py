@@ -33,7 +33,7 @@ import time
 from collections.abc import Hashable
 from dataclasses import dataclass, field
 
-from graspscape.services.coordinator.manifolds.service import refresh_manifolds
+from graspscape.services.coordinator.manifolds.service import prefeed, refresh_manifolds
 from graspscape.services.coordinator.store.models import FINISHED_STATUSES, ExplorationRow
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -92,6 +92,9 @@ class Keeper:
                 session.rollback()
                 return False
             cpu, wall = time.process_time(), time.perf_counter()
+            # The new rows fed first without the exploration's row lock: the batches of this
+            # exploration wait at their counter update only for the rest and the write.
+            prefeed(session, exploration_id)
             refresh_manifolds(session, exploration_id, final=behind[0])
             session.commit()
             self.upkeep.refreshes += 1

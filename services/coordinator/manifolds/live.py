@@ -98,6 +98,24 @@ def _new_rows(session: Session, exploration_id: int, lattice: Lattice,
     return out, rows, last
 
 
+def feed(session: Session, exploration_id: int, state: MapState) -> None:
+    """Feed the state the rows stored since it last read, without the count check (no lock
+    held: `update_state`, under the exploration's row lock, reads what came after and checks
+    the count). A stored result that changed is left to `update_state` (`add` raises before it
+    changes anything)."""
+    batch, rows, last = _new_rows(session, exploration_id, state.running.lattice,
+                                  state.last_id)
+    if not rows:
+        return
+    try:
+        dirty = state.running.add(batch)
+    except ValueError:
+        return
+    state.last_id, state.rows = last, state.rows + rows
+    state.dirty |= dirty
+    state.rescored |= state.running.rescored
+
+
 def update_state(session: Session, exploration_id: int, state: MapState,
                  fresh: Callable[[], RunningMap]) -> MapState:
     """Feed the state the rows stored since it last read; start again from every row when

@@ -32,6 +32,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
 from graspscape.services.coordinator.manifolds.live import (
     MapCache,
     MapState,
+    feed,
     fine_labels_of,
     labels_of,
     update_state,
@@ -132,6 +133,17 @@ def compute_map(
     with state.lock:
         update_state(session, exploration_id, state, fresh)
     return ComputedMap(spec_of(row), state.running, object_mesh(session, row.object_id))
+
+
+def prefeed(session: Session, exploration_id: int) -> None:
+    """The computing of a refresh before its lock: the running map fed the rows stored since
+    its last read, with no lock on the exploration's row (`refresh_manifolds` then reads only
+    what came after, checks the count and writes, under the lock). The session's read is
+    rolled back after: the refresh starts a transaction of its own."""
+    _, state, _ = _state(session, exploration_id)
+    with state.lock:
+        feed(session, exploration_id, state)
+    session.rollback()
 
 
 def refresh_manifolds(

@@ -147,3 +147,39 @@ def test_the_sweep_catches_up_a_table_left_behind(sessions, named_object) -> Non
         done, at, final = _marks(s, eid)
         assert final and at == done
         assert keeper.KEEPER.catch_up(s) == 0  # nothing behind any more
+
+
+def test_a_prefed_map_refreshes_to_the_whole_rewrite(sessions, named_object) -> None:
+    # The keeper feeds the running map without the row lock (prefeed), then refreshes under
+    # it: rows stored between the two are read by the refresh, the table is the whole
+    # rewrite's.
+    spec = sphere_grid(named_object, dtheta_deg=30, r_max=0.02, rolls=2)
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=8, max_poses=10**6).id
+        tiles = _leased(s)
+        third = len(tiles) // 3
+        for n, t in enumerate(tiles):
+            ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
+                           results=[oracle_result(p) for p in t.poses()], keeper=None)
+            if n == third:
+                service.prefeed(s, eid)  # fed, nothing written
+                assert _marks(s, eid)[1] is None
+                state = service._state(s, eid)[1]
+                running, fed = state.running, state.rows
+                assert fed == _marks(s, eid)[0]
+            if n == 2 * third:
+                service.refresh_manifolds(s, eid)
+                s.commit()
+                assert _marks(s, eid)[1] == _marks(s, eid)[0]
+                # the refresh read only the rows since the prefeed: the same map, not rebuilt
+                assert state.running is running and state.rows == _marks(s, eid)[0]
+                service.prefeed(s, eid)  # nothing new: nothing fed
+                assert state.rows == _marks(s, eid)[0]
+        service.prefeed(s, eid)
+        service.refresh_manifolds(s, eid, final=True)
+        s.commit()
+        kept = stored(s, eid)
+        service.MAPS.clear()
+        service.refresh_manifolds(s, eid, final=True)
+        s.commit()
+        assert stored(s, eid) == kept and len(kept[0]) >= 2
