@@ -205,9 +205,8 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
 
         def ingest(tile) -> int:  # type: ignore[no-untyped-def]
             n = ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
-                               worker_id="bench",
-                               results=[oracle_result(p) for p in tile.poses()],
-                               **store_only(ingest_results)).inserted
+                               worker_id="bench", **store_only(ingest_results),
+                               results=[oracle_result(p) for p in tile.poses()]).inserted
             s.commit()
             return n
 

@@ -69,8 +69,7 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     sessions = db.make_sessionmaker(engine)
     spec = {"grid": PoseGridSpec(dtheta=1.0, r_max=0.02)}
     with sessions() as session:
-        obj, _ = create_named(session, name="sphere", properties={}, shared_dir=None)
-        object_id = obj.id  # read now: the session's commits expire `obj`
+        object_id = create_named(session, name="sphere", properties={}, shared_dir=None)[0].id
         for _ in range(2):
             create_exploration(session, spec=ExplorationSpec(object_id=object_id, **spec),
                                tile_target_poses=10, max_poses=10**6)
