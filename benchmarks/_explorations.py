@@ -23,3 +23,12 @@ def create_sphere_exploration(sessions: Any, *, tile_target_poses: int) -> int:
         spec = ExplorationSpec(object_id=obj.id, gripper="robotiq_3f", grid=grid)
         return create_exploration(s, spec=spec, tile_target_poses=tile_target_poses,
                                   max_poses=10**7).id
+
+
+def store_only(ingest_results: Any) -> dict[str, Any]:
+    """`ingest_results`' arguments for storing without the manifold keeper's refresh (a
+    benchmark that builds a map and writes or times the table itself); none for a tree from
+    before the keeper."""
+    import inspect
+
+    return {"keeper": None} if "keeper" in inspect.signature(ingest_results).parameters else {}

@@ -44,8 +44,10 @@ from pathlib import Path
 # before anything imports a module of the packages a baseline run swaps
 try:
     from benchmarks._baseline import PACKAGES_AT, extract_packages
+    from benchmarks._explorations import store_only
 except ModuleNotFoundError:  # run as a script: benchmarks/ itself is on sys.path
     from _baseline import PACKAGES_AT, extract_packages  # type: ignore[no-redef]
+    from _explorations import store_only  # type: ignore[no-redef]
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds import snapshot
@@ -203,7 +205,7 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
 
         def ingest(tile) -> int:  # type: ignore[no-untyped-def]
             n = ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
-                               worker_id="bench",
+                               worker_id="bench", **store_only(ingest_results),
                                results=[oracle_result(p) for p in tile.poses()]).inserted
             s.commit()
             return n

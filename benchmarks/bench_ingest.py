@@ -16,8 +16,10 @@ each thread an exploration of its own, the same work without that lock, to compa
 as it was at git REF against today's, `--rounds` times each (medians in the results).
 
 `--refresh` (ingest_refresh.json, or `--results NAME`) times the single thread with the
-manifold table's refresh after each batch, and the manifold upkeep's own CPU per pose
-(`maybe_refresh`; this process's CPU: SQLite's work included, PostgreSQL's server not). With
+manifold table kept after each batch (the keeper, manifolds/keeper.py, after the commit; for
+a baseline from before it, `maybe_refresh` in the transaction), and the manifold upkeep's own
+CPU per pose (this process's CPU: SQLite's work included, PostgreSQL's server not); the
+other runs store without keeping the table (`keeper=None`). With
 `--baseline REF` it runs that `--rounds` times per backend, interleaved, each run in a fresh
 process: the manifolds and exploration packages (the latter holds the lattice's Point) as
 they were at git REF (`git archive`) against today's.
@@ -54,7 +56,6 @@ from graspscape.services.coordinator import db  # noqa: E402
 from graspscape.services.coordinator.exploration.samples import lattice_of  # noqa: E402
 from graspscape.services.coordinator.exploration.scheduler import ingest_results  # noqa: E402
 from graspscape.services.coordinator.exploration.specs import spec_of  # noqa: E402
-from graspscape.services.coordinator.manifolds.service import maybe_refresh  # noqa: E402
 from graspscape.services.coordinator.store.models import (  # noqa: E402
     ExplorationRow,
     PoseRow,
@@ -66,6 +67,17 @@ from benchmarks._explorations import create_sphere_exploration  # noqa: E402
 from benchmarks._results import write_results  # noqa: E402
 from benchmarks.bench_query import bench_result  # noqa: E402
 from tests.factories import fake_results  # noqa: E402
+
+try:  # the keeper runs the refresh after each committed batch (manifolds/keeper.py)
+    from graspscape.services.coordinator.manifolds.keeper import KEEPER
+except ImportError:  # a --baseline run of the packages from before the keeper
+    KEEPER = None
+    from graspscape.services.coordinator.manifolds.service import (
+        maybe_refresh,
+    )
+# The store alone (no manifold table kept) where the refresh is not what is measured.
+STORE_ONLY: dict[str, Any] = {} if KEEPER is None else {"keeper": None}
+
 
 PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 LEASE_CHUNK = 16  # tiles a worker asks for at once
@@ -100,7 +112,7 @@ def run_threads(url: str, *, seconds: float, batch: int, threads: int,
                 except queue.Empty:
                     return
                 report = ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
-                                        worker_id="bench", results=results)
+                                        worker_id="bench", results=results, **STORE_ONLY)
                 assert report.inserted == len(results) and report.tile_moved
                 stored[k] += report.inserted
                 batches[k] += 1
@@ -128,8 +140,8 @@ def run_threads(url: str, *, seconds: float, batch: int, threads: int,
 
 def run(url: str, *, seconds: float, batch: int, refresh: bool = False) -> dict[str, float]:
     """One thread storing tile after tile; with `refresh`, each batch is followed by the
-    manifold table's throttled refresh in the same transaction, as the adaptive strategy's
-    turn does it (`maybe_refresh`: every quarter more poses, at most every 1,000), on
+    manifold table's throttled refresh (the keeper after the commit: every quarter more
+    poses, at least 250 and at most 1,000; before the keeper, `maybe_refresh`), on
     bench_query's results (a smooth two-type map with realistic signatures; random
     signatures would make every pose its own manifold), both timed."""
     db.upgrade(url)
@@ -149,14 +161,18 @@ def run(url: str, *, seconds: float, batch: int, refresh: bool = False) -> dict[
                 results = ([bench_result(p) for p in tile.poses()] if refresh
                            else fake_results(tile.poses(), seed=tile.tile_id))
                 start = time.perf_counter()
+                kept = KEEPER.upkeep.cpu_s if KEEPER is not None else 0.0
                 report = ingest_results(
                     s,
                     tile_id=tile.tile_id,
                     lease_epoch=tile.lease_epoch,
                     worker_id="bench",
                     results=results,
+                    **({} if refresh else STORE_ONLY),
                 )
-                if refresh:
+                if refresh and KEEPER is not None:  # the keeper ran after the commit
+                    upkeep += KEEPER.upkeep.cpu_s - kept
+                elif refresh:  # before the keeper: the adaptive strategy's throttled refresh
                     cpu = time.process_time()
                     maybe_refresh(s, eid, spec, lattice)
                     s.commit()
@@ -302,7 +318,7 @@ def run_refresh(args: argparse.Namespace, backends: list[str],
                 url = _backend_url(stack, backend, args.pg_url)
                 got = run(url, seconds=args.seconds, batch=args.batch, refresh=refresh)
             name = backend.replace("postgresql", "postgres")
-            key = (f"ingest_with_manifold_refresh_poses_per_s_{name}" if refresh
+            key = (f"ingest_with_manifolds_poses_per_s_{name}" if refresh
                    else f"ingest_poses_per_s_{name}")
             print(f"{backend} refresh={refresh}: {got}", flush=True)
             figures[key] = round(got["poses_per_s"])
@@ -316,7 +332,8 @@ def run_refresh(args: argparse.Namespace, backends: list[str],
     if not args.no_write:
         write_results(args.results or "ingest_refresh", figures, {"note": (
             "Shared 2-core VM (other work running: see the load averages). "
-            "manifold_upkeep_cpu_ms_per_pose: maybe_refresh's CPU in this process per pose "
+            "manifold_upkeep_cpu_ms_per_pose: the keeper's refresh CPU (before it: "
+            "maybe_refresh's) in this process per pose "
             "stored (SQLite's work included; PostgreSQL's server not). ab_*: --rounds "
             "interleaved runs per backend, each in a fresh process, with the manifolds "
             "and exploration packages of --baseline (git archive) and today's; medians.")})

@@ -42,6 +42,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
 
 from benchmarks import query_clients  # noqa: E402
+from benchmarks._explorations import store_only  # noqa: E402
 from benchmarks._results import write_results  # noqa: E402
 from benchmarks.query_clients import CLIENTS, routes, run_route  # noqa: E402
 
@@ -108,7 +109,8 @@ def build(url: str, dtheta: float) -> tuple[int, float]:
                 results = [bench_result(p) for p in tile.poses()]
                 start = time.perf_counter()
                 poses += ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
-                                        worker_id="bench", results=results).inserted
+                                        worker_id="bench", results=results,
+                                        **store_only(ingest_results)).inserted
                 busy += time.perf_counter() - start
         store_manifolds(s, eid)
         store_robust_scores(s, eid)

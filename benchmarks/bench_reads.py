@@ -32,6 +32,7 @@ import psycopg
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # for tests.factories: the same results the tests use
 
+from benchmarks._explorations import store_only  # noqa: E402
 from benchmarks._results import write_results  # noqa: E402
 
 # Coarse Δθ giving about this many poses with 6 r levels and 4 rolls.
@@ -81,7 +82,8 @@ def build(url: str, dtheta: float) -> tuple[int, int, float]:
             for tile in tiles:
                 results = [oracle_result(p) for p in tile.poses()]
                 poses += ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
-                                        worker_id="bench", results=results).inserted
+                                        worker_id="bench", results=results,
+                                        **store_only(ingest_results)).inserted
         seconds = time.perf_counter() - start
         store_manifolds(s, eid)
     return eid, poses, seconds

@@ -50,11 +50,22 @@ def _sweep(app: FastAPI) -> None:
         log.info("expired leases: %d tiles queued again, %d failed", report.requeued, report.failed)
 
 
+def _catch_up(app: FastAPI) -> None:
+    # A manifold table left behind (a crash between a batch's commit and the keeper's turn,
+    # a failed exploration): the keeper's backstop, each sweep interval. Not in the first
+    # sweep of the lifespan, which the app's start waits for.
+    from graspscape.services.coordinator.manifolds.keeper import KEEPER
+
+    with app.state.sessionmaker() as session:
+        KEEPER.catch_up(session)
+
+
 async def _sweeper(app: FastAPI) -> None:
     while True:
         await asyncio.sleep(app.state.settings.queue.requeue_interval_s)
         try:
             await run_in_threadpool(_sweep, app)
+            await run_in_threadpool(_catch_up, app)
         except Exception:  # a database hiccup must not kill the sweeper for good
             log.exception("lease sweep failed; retrying next interval")
 

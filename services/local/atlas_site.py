@@ -13,7 +13,7 @@
   grasp-<label>.png
 
 Browsers load no ES module and fetch nothing from file://, so the 3D view is the live
-viewer's view3d.js bundled with three.js into one classic script (static/atlas3d.js, built by
+viewer's view3d.js bundled with three.js into one classic script (static/built/atlas3d.js, built by
 services/coordinator/web/bundle/build.mjs) and each page's data is a script too.
 """
 
@@ -215,8 +215,8 @@ def write_site(sessions: sessionmaker[Session], entries: list[AtlasEntry], out: 
                setting: AtlasSetting, *, pictures: bool = True) -> Path:
     """Write the site under `out` (its pages replaced, other files left); the index path."""
     out.mkdir(parents=True, exist_ok=True)
-    for name in ("style.css", BUNDLE):
-        shutil.copyfile(STATIC_DIR / name, out / name)
+    shutil.copyfile(STATIC_DIR / "style.css", out / "style.css")
+    shutil.copyfile(STATIC_DIR / "built" / BUNDLE, out / BUNDLE)
     summaries = []
     for entry in entries:
         with sessions() as session:

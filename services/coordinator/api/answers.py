@@ -9,8 +9,8 @@ re-created exploration has another `created_at`. So (database, exploration, thos
 names a version of the map, and an answer computed at that version, keyed by the route and
 every one of its parameters, is the answer for as long as the version stands. A finished
 exploration's version never moves again: its reads become one indexed row read and a dict
-look-up. The version is read after `ensure_manifolds` (which may refresh and commit), so an
-answer is never filed under a stale table's version.
+look-up. A read never refreshes the table (the keeper does, after committed batches:
+manifolds/keeper.py), so the version a route reads is the table it answers from.
 
 Per process, in memory, bounded by count and by bytes (a `/best?limit=100` answer with its
 poses' signatures and grasps is a few hundred kB), least recently used out. Entries are
@@ -96,11 +96,11 @@ def clear() -> None:
 # computed at, and hands every other request to FastAPI unchanged.
 #
 # Only a settled version is served this way: manifolds_final set and the manifold table at
-# every stored pose, where `ensure_manifolds` does nothing (manifolds/service._ensure); a
-# route at any other version may refresh first, so it goes through FastAPI (whose own kept
-# answers still apply). The version an answer was computed at is the one the route filed it
-# under (`answer`'s key), noted through a context variable the route's thread inherits, not a
-# version read around it: a write in between cannot file an answer under the wrong version.
+# every stored pose, which no later write moves; a route at any other version goes through
+# FastAPI (whose own kept answers still apply). The version an answer was computed at is the
+# one the route filed it under (`answer`'s key), noted through a context variable the route's
+# thread inherits, not a version read around it: a write in between cannot file an answer
+# under the wrong version.
 _ROUTES = re.compile(r"/explorations/([1-9][0-9]{0,9})/(?:best|manifolds(?:/[^/]+)?)")
 _MAX_ID = 2**31 - 1
 _noted: ContextVar[list[Any] | None] = ContextVar("graspscape_kept_versions", default=None)

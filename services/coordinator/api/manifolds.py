@@ -1,7 +1,8 @@
 """Routes for the behavioral map: manifolds, best grasps, pictures and exports.
 
-Manifolds are brought up to date with the stored poses on read (`ensure_manifolds`), so these
-routes answer for running explorations too; `final` says whether the exploration completed.
+The manifold table is read as stored: the keeper (manifolds/keeper.py) keeps it after each
+committed batch, within a stated lag (the exploration's progress shows it), and no read
+writes. `final` says whether the table is the completed exploration's.
 """
 
 from __future__ import annotations
@@ -126,7 +127,6 @@ def _json(content: bytes) -> Response:
 @router.get("/explorations/{exploration_id}/manifolds", response_model=ManifoldList,
             responses=_NOT_FOUND, summary="The behavioral manifolds, largest first")
 def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
-    manifolds.ensure_manifolds(session, exploration_id)
     key = (answers.version(session, exploration_id), "manifolds")
     return _json(answers.answer(key, lambda: _manifolds_body(session, exploration_id)))
 
@@ -146,7 +146,6 @@ def _manifolds_body(session: Any, exploration_id: int) -> bytes:
 
 def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
     """The list as models (the JSON export adds its short rows to it)."""
-    manifolds.ensure_manifolds(session, exploration_id)
     items = manifolds.stored_manifolds(session, exploration_id)
     return ManifoldList(exploration_id=exploration_id,
                         final=manifolds.is_final(session, exploration_id),
@@ -156,7 +155,6 @@ def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
 @router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
             responses=_NOT_FOUND, summary="One manifold by its label")
 def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
-    manifolds.ensure_manifolds(session, exploration_id)
     number = _label_number(label)
 
     def body() -> bytes:
@@ -215,7 +213,6 @@ def best(
             raise InvalidInput("the cone axis must not be zero", loc=("query", "cone_x"))
     elif cone_half_angle_deg is not None:
         raise InvalidInput("cone_half_angle_deg needs cone_x, cone_y, cone_z", loc=("query",))
-    manifolds.ensure_manifolds(session, exploration_id)
     # Every parameter is in the key (normalised as the computation reads them): the same
     # question at the same map version has the same answer (api/answers.py).
     key = (answers.version(session, exploration_id), "best", manifold, axis,
@@ -320,7 +317,7 @@ def _stream_poses(exploration_id: int, request: Request, session: Any,
     (export.session_pieces; the request's is closed here: FastAPI closes it only after the
     body is sent, so each stream held two connections). The stream stops, and gives its
     connection back, when the client goes away (api/streams.py)."""
-    manifolds.ensure_manifolds(session, exploration_id)
+    manifolds.require(session, exploration_id)
     session.close()
     pieces = export.session_pieces(request.app.state.sessionmaker, exploration_id, fmt)
     return ClosingStream(pieces, what=f"poses.{fmt} of exploration {exploration_id}",

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, differs
+from graspscape.services.coordinator.mapspace.maxima import local_maxima as local_maxima
 
 Lookup = Callable[[Point], StoredPose | None]
 
@@ -117,31 +118,6 @@ def normal_decisions(
                 source = low if k - lo <= hi - k else high
                 inferred.append(Inference(p.at_r(k * s), source, "normal"))
     return proposals, inferred
-
-
-def local_maxima(
-    lattice: Lattice, members: list[Point], lookup: Lookup, *, top: int
-) -> list[Point]:
-    """Viable members whose μs is at least that of every known neighbour in the manifold."""
-    member_set = set(members)
-    maxima = []
-    for p in members:
-        a = lookup(p)
-        if a is None:
-            continue
-        best = True
-        for level in range(lattice.birth(p), lattice.depth + 1):
-            for _, q in lattice.neighbours(p, level):
-                b = lookup(q)
-                if q in member_set and b is not None and b.mu_s > a.mu_s:
-                    best = False
-                    break
-            if not best:
-                break
-        if best:
-            maxima.append(p)
-    maxima.sort(key=lambda q: (-lookup(q).mu_s, q))  # type: ignore[union-attr]
-    return maxima[:top]
 
 
 def search_proposals(lattice: Lattice, maxima: list[Point], lookup: Lookup) -> list[Proposal]:

@@ -6,12 +6,15 @@ idempotent insert, the tile finished, then the counters), then the exploration's
 poses to evaluate next, and they are planned and queued (exploration/planning.py), all
 before the commit. The counter update takes the exploration row's lock, held to the commit,
 so the batches of one exploration reach their strategy one at a time, each seeing every
-result committed before it. The dispatcher and the in-process run both report through
+result committed before it. After the commit, outside that transaction, the manifold
+keeper (manifolds/keeper.py) brings the exploration's manifold table up to date where it is
+due, for every strategy. The dispatcher and the in-process run both report through
 `ingest_results`; a submission gets its first tiles from `initial_tiles`.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from datetime import datetime
 
@@ -20,6 +23,7 @@ from graspscape.services.coordinator.exploration.specs import stored_spec
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Stage
 from graspscape.services.coordinator.exploration.strategies.registry import strategy_for
 from graspscape.services.coordinator.exploration.tiling import TilePlan
+from graspscape.services.coordinator.manifolds.keeper import KEEPER, Keeper
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.ingest import IngestReport, StoredBatch, store_batch
 from graspscape.services.coordinator.store.models import (
@@ -31,6 +35,8 @@ from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.results import PoseResult
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
+
+log = logging.getLogger("graspscape.coordinator.scheduler")
 
 # Tiles of later work, as the scheduler queues them (the coordinator's tile size setting
 # applies to the first tiles of a submission).
@@ -54,9 +60,11 @@ def ingest_results(
     results: Sequence[PoseResult],
     final: bool = True,
     now: datetime | None = None,
+    keeper: Keeper | None = KEEPER,
 ) -> IngestReport:
     """Store a batch of results of one tile (store/ingest.store_batch: with `final`, the tile
-    is finished once every pose of it is stored), let the strategy react, commit.
+    is finished once every pose of it is stored), let the strategy react, commit; then the
+    `keeper`'s turn, in a transaction of its own (None: the table is left as it is).
 
     Raises what store_batch raises (NotFound, NotLeaseHolder, InvalidInput); a refused batch
     stores nothing."""
@@ -72,6 +80,14 @@ def ingest_results(
     if not stored.committed:
         after_batch(session, stored, results, now)
     session.commit()  # nothing left to commit when the store did
+    if keeper is not None and stored.exploration_status is not None:
+        try:
+            keeper.keep(session, stored.exploration_id)
+        except Exception:  # the batch is committed: its Ack must not wait on the table
+            # (the lease sweep's catch_up refreshes it later)
+            log.exception("exploration %s: the manifold table was not refreshed",
+                          stored.exploration_id)
+            session.rollback()
     return stored.report
 
 

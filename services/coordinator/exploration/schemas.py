@@ -5,6 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
+from graspscape.services.coordinator.mapspace.pose import PoseValues as PoseValues
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.results import Outcome
 from pydantic import BaseModel, ConfigDict, Field
@@ -42,6 +43,13 @@ class Progress(BaseModel):
         description="remaining planned poses / throughput; null when it cannot be estimated "
         "(fewer than 10 poses in the window, stalled, all planned poses stored) and for a "
         "finished exploration (done, incomplete, failed, cancelled)")
+    manifolds_poses_done: int = Field(
+        default=0, description="the poses the stored manifold table is at (the keeper's "
+        "last refresh); reads serve that table")
+    manifolds_lag_poses: int = Field(
+        default=0, description="poses stored but not yet in the manifold table: at most "
+        "1,000 after a batch while the exploration runs (5,000 while another refresh of it "
+        "runs), 0 once it is finished and the table final")
 
 
 class FailureReason(BaseModel):
@@ -87,21 +95,6 @@ class ExplorationCreated(BaseModel):
     status: str
     tiles_total: int
     poses_total: int
-
-
-class PoseValues(BaseModel):
-    """Where a pose is and its headline result: the one pose shape that every pose the API
-    returns carries (`PoseOut`, a stored pose in full, in /poses and /best; `PoseBrief`, a
-    manifold's best pose and local maxima, in the manifold routes and the table export)."""
-
-    theta: float = Field(description="polar angle of the approach direction from +z, rad")
-    phi: float = Field(description="azimuth of the approach direction, rad")
-    r: float = Field(description="start gap between palm and object surface, m")
-    roll: float = Field(description="roll about the palm normal, rad")
-    pitch: float
-    yaw: float
-    mu_s: float = Field(description="the simulated grasp's μs (0 where it failed)")
-    effort_max_nm: float = Field(description="largest joint effort of the grasp, N·m")
 
 
 class PoseOut(PoseValues):

@@ -132,6 +132,8 @@ def progress(
         viable_share=row.viable_count / row.poses_done if row.poses_done else None,
         throughput_poses_per_s=throughput,
         eta_s=eta,
+        manifolds_poses_done=row.manifolds_poses_done or 0,
+        manifolds_lag_poses=max(0, row.poses_done - (row.manifolds_poses_done or 0)),
     )
 
 
@@ -148,6 +150,10 @@ def cancel_exploration(session: Session, *, exploration_id: int) -> ExplorationR
     row.finished_at = now
     row.updated_at = now
     session.commit()
+    # The table of what was stored, final: the keeper's, as after a finishing batch.
+    from graspscape.services.coordinator.manifolds.keeper import KEEPER
+
+    KEEPER.keep(session, exploration_id)
     return row
 
 

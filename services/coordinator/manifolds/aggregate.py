@@ -23,10 +23,10 @@ from fractions import Fraction
 from typing import Any
 
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.exact import ONE, exact, pstdev, sqrt_of, value
 from graspscape.services.coordinator.manifolds.grouping import FineGrid, nearest_known
+from graspscape.services.coordinator.mapspace.lattice import Point
 from scipy.spatial import cKDTree
 
 
@@ -273,7 +273,12 @@ class Owners:
                         grid.embedding[own_pos], self.rho * (1 + 1e-9))])
             # and every far one: while a sweep covers the lattice, the batch is nearer to
             # most of them than their owner (a first pass to sort them out costs more).
-            cand = np.unique(np.concatenate([near, self.far[a]]))
+            # The sorted union by a mask over the positions: while the sweep runs `far` is
+            # most of the lattice, and np.unique's hash/sort of it was ~12 ms per attitude.
+            mask = np.zeros(len(grid.weights), dtype=bool)
+            mask[near] = True
+            mask[self.far[a]] = True
+            cand = np.flatnonzero(mask)
             found = searched.get((at, cand.tobytes()))
             if found is None:
                 found = searched[(at, cand.tobytes())] = nearest_known(grid, known, cand)

@@ -13,107 +13,17 @@ global comparison: a sphere approached from any side is one behaviour, while the
 from __future__ import annotations
 
 import math
-import re
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
+from graspscape.services.coordinator.mapspace.pose import StoredPose as StoredPose
+from graspscape.services.coordinator.mapspace.pose import digit as digit
+from graspscape.services.coordinator.mapspace.pose import source_of as source_of
 from scipy.spatial.transform import Rotation
 
-_LINK = re.compile(r"^([A-Za-z]+)_(?:\d+|spread|pad)$")
 SLIDE_FACTOR = 1.5
 SLACK_M = 0.005
 # Same grasp type between neighbours: every digit's mean joint angle within 0.25 rad.
 JOINT_TOLERANCE_RAD = 0.25
-
-
-def digit(link: str) -> str:
-    """The finger a link belongs to ("B_2" and the scissor base "B_spread" → "B"), or the
-    link itself ("palm")."""
-    match = _LINK.match(link)
-    return match.group(1) if match else link
-
-
-@dataclass(frozen=True)
-class StoredPose:
-    """A stored pose as the map and the strategies read it: its result, and of its grasp the
-    digits in contact, their contact centroids and the joint angles."""
-
-    key: str
-    theta: float
-    phi: float
-    r: float
-    roll: float
-    pitch: float
-    yaw: float
-    viable: bool
-    outcome: str
-    mu_s: float
-    effort: float = 0.0
-    digits: frozenset[str] = frozenset()
-    # digit → force-weighted contact centroid in the object frame
-    contacts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
-    joints: dict[str, float] = field(default_factory=dict)
-    grasp: dict[str, Any] | None = None
-    source: str = "evaluated"  # or "shortcut:normal", "shortcut:configuration", "shortcut:symmetry"
-
-    @staticmethod
-    def from_row(row: Any) -> StoredPose:
-        """From a stored pose row (columns as attributes), or from the column mapping of a
-        row about to be stored (the shortcuts' copies)."""
-        get = row.get if isinstance(row, Mapping) else lambda name: getattr(row, name, None)
-        digits: dict[str, list[tuple[tuple[float, float, float], float]]] = {}
-        sig = get("signature") or {}
-        for c in sig.get("contacts", ()):
-            digits.setdefault(digit(c["link"]), []).append(
-                (tuple(c["position_object"]), max(float(c["normal_force_n"]), 0.0))
-            )
-        for link in sig.get("links_in_contact", ()):
-            digits.setdefault(digit(link), [])
-        contacts = {}
-        for d, items in digits.items():
-            if not items:
-                continue
-            total = sum(w for _, w in items)
-            ws = [w / total if total > 0 else 1 / len(items) for _, w in items]
-            contacts[d] = tuple(
-                sum(w * pos[i] for (pos, _), w in zip(items, ws, strict=True)) for i in range(3)
-            )
-        return StoredPose(
-            key=get("pose_key"),
-            theta=get("theta"),
-            phi=get("phi"),
-            r=get("r"),
-            roll=get("roll"),
-            pitch=get("pitch"),
-            yaw=get("yaw"),
-            viable=bool(get("viable")),
-            outcome=get("outcome"),
-            mu_s=float(get("mu_s")),
-            effort=float(get("effort_max_nm") or 0.0),
-            digits=frozenset(digits),
-            contacts=contacts,  # type: ignore[arg-type]
-            joints={k: float(v) for k, v in (sig.get("joint_angles") or {}).items()},
-            grasp=get("grasp"),
-            source=source_of(get("worker_id"), get("inferred_from")),
-        )
-
-    def direction(self) -> tuple[float, float, float]:
-        st = math.sin(self.theta)
-        return (st * math.cos(self.phi), st * math.sin(self.phi), math.cos(self.theta))
-
-
-def source_of(worker_id: str | None, inferred_from: str | None) -> str:
-    """How a stored pose was obtained: "evaluated" (simulated through), or the shortcut that
-    supplied its result ("shortcut:normal" or "shortcut:symmetry" copied by the coordinator,
-    "shortcut:configuration" synthesized by a worker, trajectory outcome reused)."""
-    worker = worker_id or ""
-    if worker.startswith("shortcut:"):
-        return worker
-    if inferred_from:
-        return "shortcut:configuration"
-    return "evaluated"
 
 
 def start_frame(s: StoredPose) -> np.ndarray:

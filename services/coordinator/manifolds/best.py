@@ -14,12 +14,6 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from graspscape.services.coordinator.errors import NotFound
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.samples import (
-    _SAMPLE_COLUMNS as SAMPLE_COLUMNS,
-)
-from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
-from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.robust import (
     Neighbourhoods,
@@ -32,6 +26,12 @@ from graspscape.services.coordinator.manifolds.summary import (
     LABEL_ORDER,
     robust_order,
 )
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
+from graspscape.services.coordinator.mapspace.samples import (
+    _SAMPLE_COLUMNS as SAMPLE_COLUMNS,
+)
+from graspscape.services.coordinator.mapspace.samples import lattice_of, load_samples
+from graspscape.services.coordinator.mapspace.specs import spec_of
 from graspscape.services.coordinator.store import queries
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 from graspscape.services.coordinator.objects.geometry import MESH_QUERIES
 from scipy.spatial import cKDTree
 

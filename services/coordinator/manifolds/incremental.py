@@ -32,9 +32,9 @@ from collections import deque
 from collections.abc import Hashable, Iterable, Mapping
 from typing import Protocol
 
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
 from graspscape.services.coordinator.manifolds.specks import SpeckVotes
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 Pair = tuple[Point, Point]
 

@@ -23,11 +23,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.samples import _SAMPLE_COLUMNS, point_or_none
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
+from graspscape.services.coordinator.mapspace.samples import _SAMPLE_COLUMNS, point_or_none
 from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow, PoseRow
 from graspscape.shared.specs.pose import Pose
 from sqlalchemy import bindparam, delete, select, update
@@ -96,6 +96,24 @@ def _new_rows(session: Session, exploration_id: int, lattice: Lattice,
         if p is not None:
             out[p] = StoredPose.from_row(row)
     return out, rows, last
+
+
+def feed(session: Session, exploration_id: int, state: MapState) -> None:
+    """Feed the state the rows stored since it last read, without the count check (no lock
+    held: `update_state`, under the exploration's row lock, reads what came after and checks
+    the count). A stored result that changed is left to `update_state` (`add` raises before it
+    changes anything)."""
+    batch, rows, last = _new_rows(session, exploration_id, state.running.lattice,
+                                  state.last_id)
+    if not rows:
+        return
+    try:
+        dirty = state.running.add(batch)
+    except ValueError:
+        return
+    state.last_id, state.rows = last, state.rows + rows
+    state.dirty |= dirty
+    state.rescored |= state.running.rescored
 
 
 def update_state(session: Session, exploration_id: int, state: MapState,

@@ -43,8 +43,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 ROBUST_MIN = 0.9
 FUTILE_MAX = 0.1

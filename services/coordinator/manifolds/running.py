@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.aggregate import (
     Comp,
     DensePosSet,
@@ -61,6 +60,7 @@ from graspscape.services.coordinator.manifolds.summary import (
     robust_order,
     summary_of,
 )
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 RHO_STEPS = 1.5  # search radius of a new pose's volume, in coarse angular steps
 

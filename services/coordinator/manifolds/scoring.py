@@ -36,7 +36,6 @@ from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
 
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, differs
 from graspscape.services.coordinator.manifolds.robust import (
     ROBUST_MIN,
@@ -47,6 +46,7 @@ from graspscape.services.coordinator.manifolds.robust import (
     score,
 )
 from graspscape.services.coordinator.manifolds.summary import robust_order
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 TOP_SHARE = 0.05  # T2: the dense top 5 % by q_δ
 FOUND_COVER = 0.5  # T3: a matched run manifold covering this share of a dense one finds it
@@ -278,21 +278,8 @@ def score_run(lattice: Lattice, weights: Mapping[Point, float], dense: MapLabels
     dense_scores = _scores(hood, dense.samples)
     run_scores = _scores(hood, run.samples)
 
-    # T1
-    dense_core = _core(hood, dense)
-    claimed = _core(hood, run)
-    core_volume = _total(dense_core, weights)
-    claimed_volume = _total(claimed, weights)
-    t1 = CoreScores(
-        dense_core_volume_share=core_volume / viable_volume if viable_volume else 0.0,
-        recall=_total(claimed & dense_core, weights) / core_volume if core_volume else None,
-        claimed_false_share=(_total(claimed - dense_core, weights) / claimed_volume
-                             if claimed_volume else None),
-        claimed_volume_share=claimed_volume / viable_volume if viable_volume else 0.0,
-    )
-
-    # T2
-    q_dense = {p: dense_scores[p].q for p in points}
+    t1 = _core_scores(hood, dense, run, weights, viable_volume)
+    q_dense = {p: dense_scores[p].q for p in points}  # T2
     pick = _pick(run_scores, run.samples, run_scores)
     best_q = max(q_dense.values(), default=0.0)
     threshold = _top_threshold(list(q_dense.values()))
@@ -327,26 +314,8 @@ def score_run(lattice: Lattice, weights: Mapping[Point, float], dense: MapLabels
         large_passing=passing,
     )
 
-    # T3
     run_volumes = {label: _total(ms, weights) for label, ms in run_members.items()}
-    counts = {}
-    errors = []
-    for share in LARGE_SHARES:
-        big = [k for k in order if volumes[k] >= share * viable_volume - 1e-15]
-        hits = [k for k in big if k in matched and matched[k][1] >= FOUND_COVER * volumes[k]]
-        counts[share] = (len(big), len(hits))
-        if share == LARGE_SHARES[-1]:
-            errors = sorted(abs(run_volumes[matched[k][0]] - volumes[k]) / volumes[k]
-                            for k in hits)
-    run_viable = sum(run_volumes.values())
-    t3 = ManifoldScores(
-        large_5pct=counts[0.05][0], found_5pct=counts[0.05][1],
-        large_1pct=counts[0.01][0], found_1pct=counts[0.01][1],
-        volume_error_median=_median(errors), volume_error_max=errors[-1] if errors else None,
-        viable_volume_error=(abs(run_viable - viable_volume) / viable_volume
-                             if viable_volume else 0.0),
-    )
-
+    t3 = _manifold_scores(order, volumes, run_volumes, matched, viable_volume)
     # T4
     labelled = [p for p, s in run_scores.items() if s.label is not RobustLabel.UNCERTAIN]
     labelled_volume = _total(labelled, weights)
@@ -370,6 +339,45 @@ def score_run(lattice: Lattice, weights: Mapping[Point, float], dense: MapLabels
                                        mode_filter(lattice, run.labels, hood=hood), weights),
     )
     return RunScores(t1=t1, t2=t2, t3=t3, t4=t4, diagnostics=diagnostics)
+
+
+def _core_scores(hood: _Hood, dense: MapLabels, run: MapLabels,
+                 weights: Mapping[Point, float], viable_volume: float) -> CoreScores:
+    """T1: the dense map's robust core against the core `run` claims, by volume."""
+    dense_core = _core(hood, dense)
+    claimed = _core(hood, run)
+    core_volume = _total(dense_core, weights)
+    claimed_volume = _total(claimed, weights)
+    return CoreScores(
+        dense_core_volume_share=core_volume / viable_volume if viable_volume else 0.0,
+        recall=_total(claimed & dense_core, weights) / core_volume if core_volume else None,
+        claimed_false_share=(_total(claimed - dense_core, weights) / claimed_volume
+                             if claimed_volume else None),
+        claimed_volume_share=claimed_volume / viable_volume if viable_volume else 0.0,
+    )
+
+
+def _manifold_scores(order: list[int], volumes: Mapping[int, float],
+                     run_volumes: Mapping[int, float], matched: Mapping[int, tuple[int, float]],
+                     viable_volume: float) -> ManifoldScores:
+    """T3: the large dense manifolds `run` found (matched, covering enough) and their volumes."""
+    counts = {}
+    errors: list[float] = []
+    for share in LARGE_SHARES:
+        big = [k for k in order if volumes[k] >= share * viable_volume - 1e-15]
+        hits = [k for k in big if k in matched and matched[k][1] >= FOUND_COVER * volumes[k]]
+        counts[share] = (len(big), len(hits))
+        if share == LARGE_SHARES[-1]:
+            errors = sorted(abs(run_volumes[matched[k][0]] - volumes[k]) / volumes[k]
+                            for k in hits)
+    run_viable = sum(run_volumes.values())
+    return ManifoldScores(
+        large_5pct=counts[0.05][0], found_5pct=counts[0.05][1],
+        large_1pct=counts[0.01][0], found_1pct=counts[0.01][1],
+        volume_error_median=_median(errors), volume_error_max=errors[-1] if errors else None,
+        viable_volume_error=(abs(run_viable - viable_volume) / viable_volume
+                             if viable_volume else 0.0),
+    )
 
 
 def _median(values: list[float]) -> float | None:

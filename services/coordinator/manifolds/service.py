@@ -1,11 +1,12 @@
 """Manifolds in the store: kept up to date with the stored poses, saved, and queried.
 
 `refresh_manifolds` brings the exploration's manifold rows, the poses' manifold column and
-robust scores up to date and notes on the exploration row when (poses done, final); it runs
-as results arrive (throttled: `maybe_refresh`) and once more, final, when the exploration
-completes. The map is the process's running map of the exploration (`MAPS`, manifolds/live.py
-and running.py): a refresh reads the rows stored since the last one, updates what they change
-and writes only that, so its cost follows the new poses, not the map. The object mesh is
+robust scores up to date and notes on the exploration row when (poses done, final); the
+keeper (manifolds/keeper.py) runs it after committed batches, throttled, and once more,
+final, when the exploration completes; reads never run it. The map is the process's
+running map of the exploration (`MAPS`, manifolds/live.py and running.py): a refresh reads
+the rows stored since the last one, updates what they change and writes only that, so its
+cost follows the new poses, not the map. The object mesh is
 needed only for volumes (surface radius along each approach direction); it is prepared once
 per process and object (`objects.geometry`).
 The best grasps (/best and its evidence) are read in manifolds/best.py.
@@ -21,9 +22,6 @@ from typing import Any
 
 import numpy as np
 from graspscape.services.coordinator.errors import NotFound
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.samples import lattice_of
-from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
@@ -34,6 +32,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
 from graspscape.services.coordinator.manifolds.live import (
     MapCache,
     MapState,
+    feed,
     fine_labels_of,
     labels_of,
     update_state,
@@ -42,6 +41,9 @@ from graspscape.services.coordinator.manifolds.live import (
 from graspscape.services.coordinator.manifolds.robust import RobustScore
 from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.summary import ManifoldMap, ManifoldSummary
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
+from graspscape.services.coordinator.mapspace.samples import lattice_of
+from graspscape.services.coordinator.mapspace.specs import spec_of
 from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -55,14 +57,6 @@ from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
-REFRESH_EVERY_TILES = 10  # the first incremental refresh: at the 10th finished tile
-# Later ones once the stored poses have grown by a quarter since the last refresh, or by
-# REFRESH_MAX_POSES, whichever comes first. (A full recompute made refreshing every few
-# tiles cost the square of the exploration's size; a refresh of the running map costs about
-# its new poses, so on a large map the table is refreshed every REFRESH_MAX_POSES poses,
-# each refresh bounded, instead of absorbing a quarter of the map inside one ingest.)
-REFRESH_GROWTH = 0.25
-REFRESH_MAX_POSES = 1_000
 FALLBACK_RADIUS_M = FALLBACK_RADIUS
 # The running maps of the explorations this process refreshes (the coordinator's, the local
 # runner's): after a restart the first refresh reads the whole map once.
@@ -141,6 +135,17 @@ def compute_map(
     return ComputedMap(spec_of(row), state.running, object_mesh(session, row.object_id))
 
 
+def prefeed(session: Session, exploration_id: int) -> None:
+    """The computing of a refresh before its lock: the running map fed the rows stored since
+    its last read, with no lock on the exploration's row (`refresh_manifolds` then reads only
+    what came after, checks the count and writes, under the lock). The session's read is
+    rolled back after: the refresh starts a transaction of its own."""
+    _, state, _ = _state(session, exploration_id)
+    with state.lock:
+        feed(session, exploration_id, state)
+    session.rollback()
+
+
 def refresh_manifolds(
     session: Session,
     exploration_id: int,
@@ -198,6 +203,11 @@ def store_robust_scores(session: Session, exploration_id: int,
     return len(changed)
 
 
+def require(session: Session, exploration_id: int) -> None:
+    """NotFound where the exploration does not exist."""
+    _freshness(session, exploration_id)
+
+
 def _freshness(session: Session, exploration_id: int) -> Any:
     """What says whether the stored manifolds are current, as one row of plain columns (the
     ORM row would decode the exploration's spec on every read)."""
@@ -211,8 +221,10 @@ def _freshness(session: Session, exploration_id: int) -> Any:
 
 
 def ensure_manifolds(session: Session, exploration_id: int) -> ComputedMap | None:
-    """Bring the stored manifolds up to date with the stored poses (commits if it had to).
-    Returns the map where it had to compute it, else None (the stored one is current)."""
+    """Bring the stored manifolds up to date with the stored poses (commits if it had to), for
+    the writers that want the table current now (the map CLI, the atlas, the local run's map
+    files); the routes never call it. Returns the map where it had to compute it, else None
+    (the stored one is current)."""
     return _ensure(session, exploration_id)[1]
 
 
@@ -228,31 +240,6 @@ def _ensure(session: Session, exploration_id: int) -> tuple[bool, ComputedMap | 
     computed = refresh_manifolds(session, exploration_id, final=done)
     session.commit()
     return done, computed
-
-
-def maybe_refresh(session: Session, exploration_id: int, spec: ExplorationSpec,
-                  lattice: Lattice) -> None:
-    """Incremental refresh as tiles finish: first at the REFRESH_EVERY_TILES-th finished
-    tile, then whenever the stored poses have grown by REFRESH_GROWTH (or REFRESH_MAX_POSES)
-    since the last one."""
-    row = session.get(ExplorationRow, exploration_id)
-    if row is None:
-        return
-    refreshed_at = row.manifolds_poses_done
-    if refreshed_at:
-        due = row.poses_done >= refreshed_at + min(refreshed_at * REFRESH_GROWTH,
-                                                   REFRESH_MAX_POSES)
-    else:  # never refreshed yet: count finished tiles
-        from graspscape.services.coordinator.store.models import TileRow, TileState
-        from sqlalchemy import func
-
-        done = session.scalar(
-            select(func.count()).select_from(TileRow).where(
-                TileRow.exploration_id == exploration_id, TileRow.state == TileState.DONE)
-        ) or 0
-        due = done % REFRESH_EVERY_TILES == 0
-    if due:
-        refresh_manifolds(session, exploration_id, spec, lattice, final=False)
 
 
 # --- queries ---------------------------------------------------------------------------------
@@ -285,10 +272,10 @@ class StoredText:
 
 def stored_texts(session: Session, exploration_id: int,
                  label: int | None = None) -> tuple[bool, list[StoredText]]:
-    """Brought up to date first (`ensure_manifolds`): (final, the manifolds by label) without
-    decoding a summary, the text as stored (the routes copy it into their answer). One
-    manifold with `label`. NotFound: no exploration."""
-    final, _ = _ensure(session, exploration_id)
+    """(final, the manifolds by label) as stored (the keeper keeps them; a read never
+    refreshes) without decoding a summary, the text as stored (the routes copy it into their
+    answer). One manifold with `label`. NotFound: no exploration."""
+    final = bool(_freshness(session, exploration_id).manifolds_final)
     query = (select(ManifoldRow.label, ManifoldRow.large, ManifoldRow.size,
                     ManifoldRow.volume_cm3, cast(ManifoldRow.summary, Text))
              .where(ManifoldRow.exploration_id == exploration_id,

@@ -48,7 +48,6 @@ MIN_ROWS = 5_000  # smaller maps rebuild in a few seconds: not worth a file
 def code_version() -> str:
     """A digest of the source of every module whose classes a snapshot holds: a snapshot
     written by other code (an upgrade) is not loaded, rather than loaded half-compatible."""
-    from graspscape.services.coordinator.exploration import lattice
     from graspscape.services.coordinator.manifolds import (
         aggregate,
         behaviour,
@@ -61,9 +60,10 @@ def code_version() -> str:
         specks,
         summary,
     )
+    from graspscape.services.coordinator.mapspace import lattice, pose
 
     digest = hashlib.sha256(str(FORMAT).encode())
-    for module in (lattice, aggregate, behaviour, exact, grouping, incremental, live, robust,
+    for module in (lattice, pose, aggregate, behaviour, exact, grouping, incremental, live, robust,
                    running, specks, summary):
         digest.update(Path(module.__file__ or "").read_bytes())
     return digest.hexdigest()[:16]

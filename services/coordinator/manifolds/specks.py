@@ -25,13 +25,13 @@ import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping
 
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
 from graspscape.services.coordinator.manifolds.grouping import (
     MIN_POSES,
     MIN_SHARE,
     SPECK_TOLERANCE_RAD,
 )
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 
 class Neighbours:

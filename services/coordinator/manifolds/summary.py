@@ -18,9 +18,6 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-from graspscape.services.coordinator.exploration.lattice import Lattice, Point
-from graspscape.services.coordinator.exploration.refine import local_maxima
-from graspscape.services.coordinator.exploration.schemas import PoseValues
 from graspscape.services.coordinator.manifolds.aggregate import Stats
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
@@ -42,6 +39,9 @@ from graspscape.services.coordinator.manifolds.robust import (
     robust_core,
     robust_scores,
 )
+from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
+from graspscape.services.coordinator.mapspace.maxima import local_maxima
+from graspscape.services.coordinator.mapspace.pose import PoseValues
 from pydantic import BaseModel, Field
 
 

@@ -50,11 +50,12 @@ log = logging.getLogger("graspscape.coordinator.maps")
 
 def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "svg"], *,
                   cut: Cut = "horizontal", phi0_deg: float = 0.0, attitude: int = 0,
-                  title: str | None = None, r_mm: float | None = None, ensure: bool = True,
+                  title: str | None = None, r_mm: float | None = None, ensure: bool = False,
                   use_stored: bool = True) -> tuple[bytes, int, int]:
     """The map (PNG or SVG) with its manifold and lattice pose counts; `r_mm`: only the cut's
     band at that r (snapped to the nearest level of the finest lattice; None: every r);
-    `ensure=False`: the stored table as it is, not brought up to date first;
+    `ensure=True`: the table brought up to date first (writers: the CLI, the atlas; a
+    route never does), else drawn as stored;
     `use_stored=False`: the default picture drawn, not read back from its stored row (a
     draw-ahead drawing it again). Raises NotFound, InvalidInput (an attitude or r the grid
     does not have)."""
@@ -270,7 +271,7 @@ def write_map_files(session: Session, exploration_id: int, picture: Path,
     fmt: Literal["png", "svg"] = "svg" if picture.suffix.lower() == ".svg" else "png"
     data, n_manifolds, n_poses = picture_bytes(session, exploration_id, fmt, cut=cut,
                                                phi0_deg=phi0_deg, attitude=attitude,
-                                               r_mm=r_mm)
+                                               r_mm=r_mm, ensure=True)
     picture.write_bytes(data)
     if table is not None:
         items = stored_manifolds(session, exploration_id)

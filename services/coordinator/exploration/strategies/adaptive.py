@@ -49,7 +49,7 @@ from graspscape.services.coordinator.exploration.tiling import (
     group_tiles,
 )
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.service import maybe_refresh, refresh_manifolds
+from graspscape.services.coordinator.manifolds.service import refresh_manifolds
 from graspscape.services.coordinator.store.models import ExplorationRow, PosePlanRow, TileRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from sqlalchemy import func, select
@@ -64,8 +64,8 @@ class AdaptiveStrategy:
         # are computed on request; ingest stays at the store's own speed.
         self.reacts = self.lattice.depth > 0 or spec.shortcuts.normal_reuse or \
             spec.shortcuts.symmetry
-        # A coarse-only exploration has no search rounds; its manifolds are computed on
-        # request (manifolds.service `ensure_manifolds`), not on every ingest.
+        # A coarse-only exploration has no search rounds. The manifold table is the keeper's
+        # (manifolds/keeper.py, after each committed batch), except where a round reads it.
         self.has_rounds = self.lattice.depth > 0
         self._samples: dict[Point, StoredPose] | None = None  # read by next_round, for progress
         self._refreshed = False  # next_round stored the manifolds of these samples
@@ -201,19 +201,13 @@ class AdaptiveStrategy:
                                    rounds_done + 1)
 
     def progress(self, batch: Batch, stage: Stage) -> None:
-        """The manifolds: throttled while tiles are open, for good when finished."""
-        if stage == Stage.RUNNING:
-            maybe_refresh(batch.session, batch.exploration_id, self.spec, self.lattice)
-        elif self._refreshed:
-            # next_round stored the manifolds of these very samples; when it planned nothing
-            # more, they are the finished exploration's (what a final refresh would note).
-            if stage == Stage.FINISHED:
-                row = batch.session.get(ExplorationRow, batch.exploration_id)
-                if row is not None:
-                    row.manifolds_final = True
-        else:
-            refresh_manifolds(batch.session, batch.exploration_id, self.spec, self.lattice,
-                              samples=self._samples, final=stage == Stage.FINISHED)
+        """The manifold table is the keeper's, after the commit (manifolds/keeper.py); only
+        where next_round stored the manifolds of these very samples and planned nothing more
+        are they the finished exploration's (what the keeper's final refresh would note)."""
+        if stage == Stage.FINISHED and self._refreshed:
+            row = batch.session.get(ExplorationRow, batch.exploration_id)
+            if row is not None:
+                row.manifolds_final = True
 
     # --- helpers -------------------------------------------------------------------------
     def _plans(self, batch: Batch) -> int:

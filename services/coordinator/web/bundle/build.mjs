@@ -1,4 +1,4 @@
-// Builds ../static/atlas3d.js: bundle/atlas3d.entry.js with the viewer's view3d.js and the
+// Builds ../static/built/atlas3d.js: bundle/atlas3d.entry.js with the viewer's view3d.js and the
 // vendored three.js 0.170.0 (static/vendor/) as one minified classic script (IIFE) for the
 // static atlas site, which opens from file:// where browsers load no ES module.
 //
@@ -14,7 +14,7 @@ import { fileURLToPath } from "node:url";
 import * as esbuild from "esbuild";
 
 const web = join(dirname(fileURLToPath(import.meta.url)), "..");
-const out = join(web, "static", "atlas3d.js");
+const out = join(web, "static", "built", "atlas3d.js");
 
 // The vendored modules import "three" by name (the live page's import map); here it is the
 // same vendored file, so both pages run the very same three.js.

@@ -14,8 +14,9 @@ from graspscape.services.coordinator.api.pages import CursorPage
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds.grouping import label_name
+from graspscape.services.coordinator.manifolds.service import ensure_manifolds
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
-from graspscape.services.coordinator.store.models import ManifoldRow
+from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from pydantic import TypeAdapter
 from sqlalchemy import create_engine, select, text
@@ -82,6 +83,10 @@ def _kept_per_version(client, object_id, sessions) -> int:  # type: ignore[no-un
         for t in tiles[:half]:
             ingest_results(s, tile_id=t.tile_id, lease_epoch=t.lease_epoch, worker_id="w",
                            results=[oracle_result(p) for p in t.poses()])
+        # Fewer poses than the keeper's REFRESH_MIN_POSES: the running table is refreshed by
+        # a writer here (reads serve what is stored, never refresh).
+        assert s.get(ExplorationRow, eid).manifolds_poses_done is None
+        ensure_manifolds(s, eid)
     first = read()
     # Written as FastAPI writes the response model (what the routes answered before they
     # returned bytes): validated and dumped again, the same bytes.

@@ -145,7 +145,8 @@ def test_a_running_maps_default_picture_is_drawn_ahead_and_served_only_at_its_ve
     eid = _grid(sessions, named_object("sphere"), tiles=3)
     title = stored.default_title(eid)
     with sessions() as s:
-        picture.picture_bytes(s, eid, "png", cut="vertical")  # refreshes the stale table
+        # a writer's draw (the CLI's) refreshes the stale table first; a route's would not
+        picture.picture_bytes(s, eid, "png", cut="vertical", ensure=True)
     stored.wait_prerendered()
     with sessions() as s:
         row = s.get(ExplorationRow, eid)

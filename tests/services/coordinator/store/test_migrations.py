@@ -69,9 +69,9 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     sessions = db.make_sessionmaker(engine)
     spec = {"grid": PoseGridSpec(dtheta=1.0, r_max=0.02)}
     with sessions() as session:
-        obj, _ = create_named(session, name="sphere", properties={}, shared_dir=None)
+        object_id = create_named(session, name="sphere", properties={}, shared_dir=None)[0].id
         for _ in range(2):
-            create_exploration(session, spec=ExplorationSpec(object_id=obj.id, **spec),
+            create_exploration(session, spec=ExplorationSpec(object_id=object_id, **spec),
                                tile_target_poses=10, max_poses=10**6)
         for t in lease_tiles(session, worker_id="w", n=4, lease_seconds=60):
             ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
@@ -120,7 +120,7 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
 
         newest = max(row.id for row in before["explorations"])
         delete_exploration(session, exploration_id=newest)
-        again = create_exploration(session, spec=ExplorationSpec(object_id=obj.id, **spec),
+        again = create_exploration(session, spec=ExplorationSpec(object_id=object_id, **spec),
                                    tile_target_poses=10, max_poses=10**6)
         assert again.id == newest + 1
     with engine.connect() as c:
