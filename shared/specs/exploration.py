@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 from graspscape.shared.specs.gripper import list_grippers
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import POLICY_NAMES, SimSettings
+from graspscape.shared.specs.uncertainty import UncertaintyModel
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 # Names of grippers and policies are resolved by the workers (configs/grippers, policy
@@ -195,7 +196,12 @@ class CertificationSpec(BaseModel):
         description="σ_ang: the robot's attitude error (one standard deviation, per axis), deg")
     jitters: int = Field(
         default=8, ge=0, le=64,
-        description="K: jittered poses evaluated around each returned best grasp (0: none)")
+        description="unused: draws of the uncertainty model are planned by the sequential "
+        "rule (docs/metrics.md, \"P(success)\"); kept so stored specs still read")
+    level: float = Field(
+        default=0.9, gt=0.0, lt=1.0,
+        description="certified: the 95 % lower bound of P(success) under the exploration's "
+        "uncertainty model is at least this")
 
 
 class AdaptiveStrategySpec(BaseModel):
@@ -318,6 +324,10 @@ class ExplorationSpec(BaseModel):
     )
     refinement: RefinementSpec = Field(default_factory=RefinementSpec)
     shortcuts: ShortcutsSpec = Field(default_factory=ShortcutsSpec)
+    uncertainty: UncertaintyModel = Field(
+        default_factory=UncertaintyModel,
+        description="the errors P(success) is stated under: start pose error, friction, mass "
+        "and closing-effort scales; presets 'none', 'lab' (default), 'field'")
     certification: CertificationSpec = Field(
         default_factory=CertificationSpec,
         description="the adaptive strategy's certification of its best grasps (used by "
