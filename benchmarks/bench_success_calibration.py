@@ -112,13 +112,23 @@ class Drawer:
                 return
             self.extend(todo, "run", purpose)
 
-    def race(self, keys: list[str]) -> None:
+    def race(self, keys: list[str], room: int) -> None:
+        """LUCB steps until the race is decided or `room` draws are spent (a look cut short
+        by the budget counts only once complete: `success.estimate`)."""
+        start = self.spent["run"]
         while True:
             chosen = success.race([self.estimate(k) for k in keys])
-            if not chosen:
+            left = room - (self.spent["run"] - start)
+            if not chosen or left <= 0:
                 return
-            self.extend({keys[i]: success.next_look(self.estimate(keys[i]).n) for i in chosen},
-                        "run", "run")
+            wanted = {}
+            for i in chosen:
+                have = self.estimate(keys[i]).n
+                take = min(success.next_look(have) - have, left)
+                if take > 0:
+                    wanted[keys[i]] = have + take
+                    left -= take
+            self.extend(wanted, "run", "run")
 
 
 def sample_cost(name: str, n: int) -> dict[str, float]:
@@ -147,7 +157,7 @@ def sample_cost(name: str, n: int) -> dict[str, float]:
             "sample_cost_held_share": round(sum(r.viable for r in full) / n, 3)}
 
 
-def explore(name: str, pool) -> tuple[dict, dict]:
+def explore(name: str, pool, dtheta_deg: float, levels: int) -> tuple[dict, dict]:
     """The uncertified default run: its map's poses and its counts."""
     url = f"sqlite:///{tempfile.mkdtemp()}/bench.db"
     db.upgrade(url)
@@ -156,9 +166,9 @@ def explore(name: str, pool) -> tuple[dict, dict]:
         oid = store_object(s, name)
         r0, r1, dr = DEFAULT_R
         spec = ExplorationSpec(
-            object_id=oid, grid=PoseGridSpec(dtheta=math.radians(DEFAULT_DTHETA_DEG),
+            object_id=oid, grid=PoseGridSpec(dtheta=math.radians(dtheta_deg),
                                              r_min=r0, r_max=r1, dr=dr),
-            refinement=RefinementSpec(levels=DEFAULT_LEVELS),
+            refinement=RefinementSpec(levels=levels),
             certification=CertificationSpec(share=0.0), label="success-calibration")
         eid = create_exploration(s, spec=spec, tile_target_poses=60, max_poses=10**7).id
     evaluate = pybullet_evaluator(ObjectSpec(name=name), settings=spec.settings, pool=pool)
@@ -181,7 +191,7 @@ def explore(name: str, pool) -> tuple[dict, dict]:
 
 
 def score_object(name: str, run: dict, counts: dict, model_name: str, pool, fresh: int,
-                 n_random: int, seed: int) -> dict:
+                 n_random: int, seed: int, share: float) -> dict:
     model = UncertaintyModel(preset=model_name)
     samples, robust, torque = run["samples"], run["robust"], run["torque"]
     mesh = run["mesh"]
@@ -206,9 +216,11 @@ def score_object(name: str, run: dict, counts: dict, model_name: str, pool, fres
         "torque_margin": lambda k: (-(torque.get(k) or 0.0), -samples[k].mu_s, k),
     }
     picks: dict[str, dict[int, list[str]]] = {r: {} for r in RANKINGS}
-    for label, keys in sorted(members.items()):
+    budget = math.floor(share * counts["evaluations"])
+    for i, (label, keys) in enumerate(sorted(members.items())):
         cands = sorted(keys, key=orders["robust"])[:CANDIDATES]
-        drawer.race(cands)  # the certification's own draws: the run's cost
+        room = -(-(budget - drawer.spent["run"]) // (len(members) - i))  # an even share
+        drawer.race(cands, room)  # the certification's own draws: the run's cost
         picks["p_success"][label] = sorted(cands, key=lambda k: (
             -drawer.estimate(k).lower, -drawer.estimate(k).p, k))[:3]
         for r in ("robust", "mu_s", "torque_margin"):
@@ -254,8 +266,14 @@ def main() -> None:
     parser.add_argument("--models", nargs="+", default=["lab", "field"])
     parser.add_argument("--fresh", type=int, default=100, help="fresh draws per scored pose")
     parser.add_argument("--random", type=int, default=30, help="random held poses scored")
+    parser.add_argument("--share", type=float, default=0.4,
+                        help="the race's draws: at most this share of the run's evaluations")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="success_calibration")
+    parser.add_argument("--dtheta-deg", type=float, default=DEFAULT_DTHETA_DEG,
+                        help="the exploration's grid step (default: `graspscape explore`'s)")
+    parser.add_argument("--levels", type=int, default=DEFAULT_LEVELS,
+                        help="refinement levels (default: `graspscape explore`'s)")
     parser.add_argument("--sample-cost", type=int, default=40,
                         help="poses of the first object timed for the draw's cost (0: none)")
     args = parser.parse_args()
@@ -267,11 +285,11 @@ def main() -> None:
     print(f"cost: {cost}", flush=True)
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         for name in args.objects:
-            run, counts = explore(name, pool)
+            run, counts = explore(name, pool, args.dtheta_deg, args.levels)
             print(f"{name}: explored, {counts}", flush=True)
             for model in args.models:
                 res = score_object(name, run, counts, model, pool, args.fresh, args.random,
-                                   seed=20261205)
+                                   seed=20261205, share=args.share)
                 results.append(res)
                 print(f"{name} {model}: {res['draws']} {res['score_wall_s']} s", flush=True)
                 # Written after every object and model: a run cut short keeps what it did.
@@ -287,8 +305,10 @@ def _write(args: argparse.Namespace, results: list[dict], cost: dict, load_start
     figures["wall_s"] = round(wall, 1)
     write_results(args.out, figures, extra={
         "per_object_model": detail,
-        "setup": {"objects": args.objects, "models": args.models, "fresh_draws": args.fresh,
-                  "random_held": args.random, "candidates_per_manifold": CANDIDATES,
+        "setup": {"objects": args.objects, "dtheta_deg": args.dtheta_deg,
+                  "levels": args.levels, "models": args.models, "fresh_draws": args.fresh,
+                  "random_held": args.random, "share": args.share,
+                  "candidates_per_manifold": CANDIDATES,
                   "looks": list(success.LOOKS), "level": success.LEVEL,
                   "confidence": success.CONFIDENCE, "workers": args.workers,
                   "done": [f"{r['object']} {r['model']}" for r in results]},
