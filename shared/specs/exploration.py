@@ -168,26 +168,28 @@ class ShortcutsSpec(BaseModel):
 
 class CertificationSpec(BaseModel):
     """The adaptive strategy's last stage (services/coordinator/exploration/certify.py): after
-    border refinement and local search, evaluate the missing finest-lattice neighbours N_δ of
-    each large manifold's candidate grasps, and K deterministic jitters of the stated pose
-    error around each returned best grasp, so that a robust claim rests on evaluated
-    neighbours rather than on an interpolated map (docs/exploration.md, "Certification")."""
+    border refinement and local search, each large manifold's candidates race for draws of
+    the exploration's uncertainty model, sampled by an anytime-valid sequential rule, so that
+    P(success) has a 95 % bound and "certified" means the lower bound clears `level`
+    (docs/exploration.md, "Certification"; docs/metrics.md, "P(success)"). `pose_error_mm`,
+    `pose_error_deg` and `jitters` are read only by the pure plan without a race."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     share: float = Field(
-        default=0.05, ge=0.0, le=0.5,
+        default=0.35, ge=0.0, le=0.5,
         description="budget: extra evaluations as a share of the exploration's other planned "
-        "poses, shared among the large manifolds (0: no certification)")
+        "poses, shared among the large manifolds (0: no certification); the draws of the "
+        "P(success) race take all but `core_share` of it")
     core_share: float = Field(
-        default=0.5, ge=0.0, le=1.0,
+        default=0.25, ge=0.0, le=1.0,
         description="of that budget, the share kept for core claims: completing N_δ around "
         "poses deep inside large manifolds, so the robust core is claimed where it is (they "
         "also take what the best grasps leave; 0: no claims)")
     candidates: int = Field(
         default=3, ge=0, le=20,
-        description="per large manifold, its best poses by point quality (μs) whose N_δ is "
-        "completed, besides its current robust best")
+        description="per large manifold, the candidates that race for P(success) draws (its "
+        "best by the robust map), and its best poses by μs whose N_δ is completed")
     pose_error_mm: float = Field(
         default=2.0, ge=0.0, le=50.0,
         description="σ_pos: the robot's position error (one standard deviation, per axis), mm")

@@ -147,7 +147,7 @@ def test_plan_shares_the_budget_returned_grasps_first_overall_best_first() -> No
 
 
 def test_budget_is_a_share_of_the_other_planned_poses() -> None:
-    assert certify.budget(CertificationSpec(), 1000) == 50
+    assert certify.budget(CertificationSpec(), 1000) == 350  # ≤ 40 % more evaluations
     assert certify.budget(CertificationSpec(share=0.0), 1000) == 0
     assert certify.budget(CertificationSpec(share=0.5), 7) == 3
     assert certify.centre_id_of(certify.reason_for(12345)) == 12345
