@@ -201,7 +201,8 @@ def best(
         "over the pose-error neighbourhood N_δ — robust poses first, then uncertain, fragile, "
         "futile, each by robust quality q_δ; point: by the pose's own torque_margin_ratio; "
         "or by μs, a static metric (mu_g, mu_f, mu_m) or a robustness margin or test; highest "
-        "first, except torque_margin_nm and friction_margin (lowest first); poses without the value come last, ties by μs"
+        "first, except torque_margin_nm and friction_margin (lowest first); poses without the "
+        "value come last, ties by μs"
     )] = ranking.BEST_DEFAULT_RANK,
     pose_error_mm: Annotated[float | None, Query(
         ge=0.0, le=1e4, allow_inf_nan=False,
