@@ -37,6 +37,7 @@ def _explore(args: argparse.Namespace) -> int:
         "robustness": None if args.robustness is None else tuple(
             t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
         "quiet": args.quiet,
+        "uncertainty": args.uncertainty,
     }
     return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
 
@@ -81,6 +82,10 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
         help="robustness tests run on every held pose, comma-separated "
         "(torque_margin, friction_margin, gravity, force, tug, shake), or 'none'; "
         "default: the exploration spec's")
+    explore.add_argument(
+        "--uncertainty", choices=["none", "lab", "field"],
+        help="the errors P(success) is stated and certified under: lab (default; 2 mm / 2° "
+        "start pose error), field (5 mm / 5°, friction ×0.5–1, mass ×0.8–1.2) or none")
     explore.add_argument("--quiet", action="store_true", help="no progress bar")
     explore.set_defaults(handler=_explore)
 
