@@ -330,6 +330,13 @@ def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
     assert answer["pose_key"] == best.key
     assert answer["evidence"]["certifying"] == answer["evidence"]["certifying_held"] == \
         success.LOOKS[2]
+    # GET /best (rank=p_success, the default): the certified grasp first, with k, n, bounds.
+    default = client.get(f"/explorations/{eid}/best").json()
+    assert default["rank"] == "p_success" and default["level"] == RACE.level
+    first = default["poses"][0]
+    assert first["pose_key"] == best.key
+    assert (first["success"]["k"], first["success"]["n"]) == (success.LOOKS[2],) * 2
+    assert first["success"]["certified"] and first["success"]["lower"] == best.lower
     plan = _plan_of(sessions, eid)
     assert sum(1 for _, c in plan if c == best.key) == success.LOOKS[2]
     # Same spec, other worker count and report order: the same certification plan.
