@@ -190,12 +190,14 @@ def _candidates(session: Session, exploration_id: int, spec: ExplorationSpec,
     points = racing.candidates(members, samples, scores, max(1, spec.certification.candidates))
     seqs = {p: racing.draw_poses(samples[p], spec.uncertainty, radius(p),
                                  racing.success.LOOKS[-1]) for p in points}
-    stored = _stored(session, exploration_id, [q.key() for s in seqs.values() for q in s])
+    stored = stored_by_key(session, exploration_id, [q.key() for s in seqs.values() for q in s])
     return racing.assess(points, samples, seqs.__getitem__, stored,
                          level=spec.certification.level)
 
 
-def _stored(session: Session, exploration_id: int, keys: Sequence[str]) -> dict[str, StoredPose]:
+def stored_by_key(session: Session, exploration_id: int, keys: Sequence[str]
+                  ) -> dict[str, StoredPose]:
+    """The stored poses among `keys` (the draws of a race: off the lattice), by key."""
     out: dict[str, StoredPose] = {}
     for chunk in _chunks(sorted(set(keys))):
         for row in session.scalars(select(PoseRow).where(

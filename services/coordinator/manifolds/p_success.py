@@ -13,7 +13,7 @@ from collections.abc import Iterable
 
 import numpy as np
 from graspscape.services.coordinator.exploration import racing, success
-from graspscape.services.coordinator.exploration.certify_store import _stored
+from graspscape.services.coordinator.exploration.certify_store import stored_by_key
 from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
 from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.manifolds.grouping import FALLBACK_RADIUS, surface_radii
@@ -64,7 +64,8 @@ def estimates(session: Session, exploration_id: int,
     for p, s in samples.items():
         radius = float(surface_radii(mesh, np.array([lattice.direction(p)]), FALLBACK_RADIUS)[0])
         seqs[s.key] = (s, racing.draw_poses(s, spec.uncertainty, radius, success.LOOKS[-1]))
-    stored = _stored(session, exploration_id, [q.key() for _, seq in seqs.values() for q in seq])
+    keys_drawn = [q.key() for _, seq in seqs.values() for q in seq]
+    stored = stored_by_key(session, exploration_id, keys_drawn)
     level = spec.certification.level
     out = {}
     for key, (centre, seq) in seqs.items():
