@@ -40,6 +40,7 @@ def _explore(args: argparse.Namespace) -> int:
             t.strip() for t in args.robustness.split(",") if t.strip() and t.strip() != "none"),
         "quiet": args.quiet,
         "new": args.new,
+        "uncertainty": args.uncertainty,
     }
     return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
 
@@ -66,6 +67,10 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
         "default: the exploration spec's")
     explore.add_argument("--engine", choices=["pybullet", "mujoco"],
                          help="physics engine (default pybullet; docs/simulation.md)")
+    explore.add_argument(
+        "--uncertainty", choices=["none", "lab", "field"],
+        help="the errors P(success) is stated and certified under: lab (default; 2 mm / 2° "
+        "start pose error), field (5 mm / 5°, friction ×0.5–1, mass ×0.8–1.2) or none")
     explore.add_argument("--quiet", action="store_true", help="no progress bar")
     explore.add_argument("--new", action="store_true",
                          help="explore again even where this very exploration is done (by "

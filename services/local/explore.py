@@ -18,6 +18,7 @@ import socket
 import sys
 import time
 from pathlib import Path
+from typing import Literal
 
 from graspscape.services.coordinator.dispatch.leases import requeue_lost
 from graspscape.services.coordinator.dispatch.service import Dispatcher
@@ -53,6 +54,7 @@ from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, R
 from graspscape.shared.specs.objects import LengthUnit
 from graspscape.shared.specs.robustness import TestName
 from graspscape.shared.specs.sim import EngineName
+from graspscape.shared.specs.uncertainty import UncertaintyModel
 from graspscape.workers.runtime.config import WorkerConfig, default_procs
 from graspscape.workers.runtime.supervisor import Supervisor
 from pydantic import BaseModel, Field
@@ -82,6 +84,7 @@ class ExploreOptions(BaseModel):
     quiet: bool = False
     new: bool = Field(default=False, description="explore again where this very exploration "
                       "is done")
+    uncertainty: Literal["none", "lab", "field"] = "lab"
 
 
 def _free_port() -> int:
@@ -146,9 +149,9 @@ def outcome_line(session: Session, exploration_id: int, stored: int, elapsed_s: 
 
 
 def robust_lines(robust: RobustSummary) -> str:
-    """The robust best grasp of each large manifold (docs/exploration.md, "Certification"):
-    volume and robust core, s_δ and q_δ, the pose, and what backs the claim."""
-    lines = ["robust best grasp per large manifold (≥ 1 % of the viable volume):"]
+    """The pick of each large manifold by P(success) (docs/exploration.md, "Certification"):
+    volume and robust core, s_δ, the pose, k/n with the 95 % bounds, and the claim."""
+    lines = ["best grasp by P(success) per large manifold (≥ 1 % of the viable volume):"]
     lines += [format_best(b) for b in robust.bests]
     if robust.dust_count:
         lines.append(f"  dust: {robust.dust_count} smaller manifolds, "
@@ -199,6 +202,7 @@ def _spec(opts: ExploreOptions) -> ExplorationSpec:
         grid=PoseGridSpec(dtheta=math.radians(opts.dtheta_deg), r_min=opts.r_min,
                           r_max=opts.r_max, dr=opts.dr, attitudes={"rolls": opts.rolls}),
         refinement=RefinementSpec(levels=opts.levels),
+        uncertainty=UncertaintyModel(preset=opts.uncertainty),
         label=f"graspscape explore {opts.object}",
     )
     if opts.engine is not None:

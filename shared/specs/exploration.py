@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 from graspscape.shared.specs.gripper import find_gripper, unknown_gripper_message
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import POLICY_NAMES, SimSettings
+from graspscape.shared.specs.uncertainty import UncertaintyModel
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 # Names of grippers and policies are resolved by the workers (configs/grippers, policy
@@ -166,26 +167,28 @@ class ShortcutsSpec(BaseModel):
 
 class CertificationSpec(BaseModel):
     """The adaptive strategy's last stage (services/coordinator/exploration/certify.py): after
-    border refinement and local search, evaluate the missing finest-lattice neighbours N_δ of
-    each large manifold's candidate grasps, and K deterministic jitters of the stated pose
-    error around each returned best grasp, so that a robust claim rests on evaluated
-    neighbours rather than on an interpolated map (docs/exploration.md, "Certification")."""
+    border refinement and local search, each large manifold's candidates race for draws of
+    the exploration's uncertainty model, sampled by an anytime-valid sequential rule, so that
+    P(success) has a 95 % bound and "certified" means the lower bound clears `level`
+    (docs/exploration.md, "Certification"; docs/metrics.md, "P(success)"). `pose_error_mm`,
+    `pose_error_deg` and `jitters` are read only by the pure plan without a race."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     share: float = Field(
-        default=0.05, ge=0.0, le=0.5,
+        default=0.35, ge=0.0, le=0.5,
         description="budget: extra evaluations as a share of the exploration's other planned "
-        "poses, shared among the large manifolds (0: no certification)")
+        "poses, shared among the large manifolds (0: no certification); the draws of the "
+        "P(success) race take all but `core_share` of it")
     core_share: float = Field(
-        default=0.5, ge=0.0, le=1.0,
+        default=0.25, ge=0.0, le=1.0,
         description="of that budget, the share kept for core claims: completing N_δ around "
         "poses deep inside large manifolds, so the robust core is claimed where it is (they "
         "also take what the best grasps leave; 0: no claims)")
     candidates: int = Field(
         default=3, ge=0, le=20,
-        description="per large manifold, its best poses by point quality (μs) whose N_δ is "
-        "completed, besides its current robust best")
+        description="per large manifold, the candidates that race for P(success) draws (its "
+        "best by the robust map), and its best poses by μs whose N_δ is completed")
     pose_error_mm: float = Field(
         default=2.0, ge=0.0, le=50.0,
         description="σ_pos: the robot's position error (one standard deviation, per axis), mm")
@@ -194,7 +197,12 @@ class CertificationSpec(BaseModel):
         description="σ_ang: the robot's attitude error (one standard deviation, per axis), deg")
     jitters: int = Field(
         default=8, ge=0, le=64,
-        description="K: jittered poses evaluated around each returned best grasp (0: none)")
+        description="unused: draws of the uncertainty model are planned by the sequential "
+        "rule (docs/metrics.md, \"P(success)\"); kept so stored specs still read")
+    level: float = Field(
+        default=0.9, gt=0.0, lt=1.0,
+        description="certified: the 95 % lower bound of P(success) under the exploration's "
+        "uncertainty model is at least this")
 
 
 class AdaptiveStrategySpec(BaseModel):
@@ -320,6 +328,10 @@ class ExplorationSpec(BaseModel):
     )
     refinement: RefinementSpec = Field(default_factory=RefinementSpec)
     shortcuts: ShortcutsSpec = Field(default_factory=ShortcutsSpec)
+    uncertainty: UncertaintyModel = Field(
+        default_factory=UncertaintyModel,
+        description="the errors P(success) is stated under: start pose error, friction, mass "
+        "and closing-effort scales; presets 'none', 'lab' (default), 'field'")
     certification: CertificationSpec = Field(
         default_factory=CertificationSpec,
         description="the adaptive strategy's certification of its best grasps (used by "

@@ -21,8 +21,9 @@ from graspscape.services.coordinator.api.streams import ClosingStream
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds import best as ranking
-from graspscape.services.coordinator.manifolds import export
+from graspscape.services.coordinator.manifolds import export, p_success
 from graspscape.services.coordinator.manifolds import service as manifolds
+from graspscape.services.coordinator.manifolds.p_success import SuccessOut
 from graspscape.services.coordinator.manifolds.robust import coarser_for_error, error_in_steps
 from graspscape.services.coordinator.manifolds.summary import (
     ManifoldSummary,
@@ -97,6 +98,9 @@ class BestPose(PoseOut):
                                      "futile (s ≤ 0.1), or uncertain where the unknown members "
                                      "could change the label; null off the lattice")
     evidence: CertificationEvidence
+    success: SuccessOut | None = Field(
+        default=None, description="P(success) under the exploration's uncertainty model: k of "
+        "n draws, the anytime-valid 95 % bounds and the claim; null where nothing was drawn")
 
 
 class BestOut(BaseModel):
@@ -108,6 +112,9 @@ class BestOut(BaseModel):
     delta_deg: float = Field(description="δ as an angle between approach directions, °")
     delta_mm: float = Field(description="δ along r, mm")
     error_within_delta: bool = Field(description="the stated pose error is within δ")
+    uncertainty: dict[str, Any] = Field(
+        default_factory=dict, description="the uncertainty model P(success) is stated under")
+    level: float = Field(default=0.9, description="certified: lower bound ≥ this at 95 %")
     poses: list[BestPose]
 
 
@@ -187,11 +194,13 @@ def best(
     max_effort_nm: Annotated[float | None, Query(ge=0.0, le=1e6, allow_inf_nan=False)] = None,
     limit: Annotated[int, Query(ge=1, le=100)] = 1,
     rank: Annotated[ranking.Rank, Query(
-        description="robust (default): by the robust map over the pose-error neighbourhood "
-        "N_δ — robust poses first, then uncertain, fragile, futile, each by robust quality "
-        "q_δ; point: by the pose's own torque_margin_ratio; or by μs, a static metric (mu_g, "
-        "mu_f, mu_m) or a robustness margin or test; highest first, except torque_margin_nm "
-        "and friction_margin (lowest first); poses without the value come last, ties by μs"
+        description="p_success (default): by the 95 % lower bound of P(success) under the "
+        "exploration's uncertainty model, poses with draws first; robust: by the robust map "
+        "over the pose-error neighbourhood N_δ — robust poses first, then uncertain, fragile, "
+        "futile, each by robust quality q_δ; point: by the pose's own torque_margin_ratio; "
+        "or by μs, a static metric (mu_g, mu_f, mu_m) or a robustness margin or test; highest "
+        "first, except torque_margin_nm and friction_margin (lowest first); poses without the "
+        "value come last, ties by μs"
     )] = ranking.BEST_DEFAULT_RANK,
     pose_error_mm: Annotated[float | None, Query(
         ge=0.0, le=1e4, allow_inf_nan=False,
@@ -242,6 +251,8 @@ def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
     )
     evidence = ranking.robust_evidence(session, exploration_id, rows, coarser=coarser,
                                        lattice=lattice)
+    chances = p_success.estimates(session, exploration_id, [r.pose_key for r in rows])
+    model, level = p_success.model_of(session, exploration_id)
     poses = []
     for row, ev in zip(rows, evidence, strict=True):
         sc = ev.score
@@ -257,6 +268,7 @@ def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
                 neighbours_evaluated=ev.neighbours_evaluated,
                 neighbours_held=ev.neighbours_held, certifying=ev.certifying,
                 certifying_held=ev.certifying_held),
+            success=chances.get(row.pose_key),
         ))
     steps = 1 << coarser
     out = BestOut(
@@ -267,6 +279,7 @@ def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
         delta_mm=lattice.dr(lattice.depth) * 1000.0 * steps,
         error_within_delta=error_in_steps(lattice, pose_error_mm, pose_error_deg)
         <= steps + 1e-9,
+        uncertainty=model.model_dump(mode="json"), level=level,
         poses=poses,
     )
     return encoded(out)

@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 from graspscape.services.coordinator.datasets.rows import (
     QUALITIES,
+    SUCCESS_QUALITIES,
     Chunk,
     dataset_source,
     exploration_mesh,
@@ -28,7 +29,7 @@ _TEXT = h5py.string_dtype()
 _LAYOUT: dict[str, tuple[tuple[int, ...], Any]] = {
     "grasps/transforms": ((4, 4), np.float64),
     "grasps/qualities/flex/object_in_gripper": ((), np.int8),
-    **{f"grasps/qualities/{q}": ((), np.float64) for q in QUALITIES},
+    **{f"grasps/qualities/{q}": ((), np.float64) for q in (*QUALITIES, *SUCCESS_QUALITIES)},
     "grasps/from_grasp": ((), np.int8),
     "grasps/outcome": ((), _TEXT),
     "grasps/pose_key": ((), _TEXT),
@@ -40,7 +41,8 @@ def _columns(chunk: Chunk) -> dict[str, Any]:
     return {
         "grasps/transforms": chunk.transforms,
         "grasps/qualities/flex/object_in_gripper": chunk.success,
-        **{f"grasps/qualities/{q}": chunk.qualities[q] for q in QUALITIES},
+        **{f"grasps/qualities/{q}": chunk.qualities[q]
+           for q in (*QUALITIES, *SUCCESS_QUALITIES)},
         "grasps/from_grasp": chunk.from_grasp,
         "grasps/outcome": chunk.outcomes,
         "grasps/pose_key": chunk.pose_keys,

@@ -1,6 +1,8 @@
 """GraspGen's grasp dataset layout (NVlabs/GraspGen, docs/GRIPPER_DESCRIPTION.md): one JSON per
 object, `object.file`, `object.scale`, `grasps.transforms` (4×4, the gripper's base frame in
-the object frame) and `grasps.object_in_gripper` (success mask). Written in one pass: the
+the object frame) and `grasps.object_in_gripper` (success mask); `graspscape.p_success_lower`
+holds the 95 % lower bound of P(success) where the certification drew around a pose (null
+elsewhere). Written in one pass: the
 transforms are streamed chunk by chunk, the per-pose flags (one byte each) kept until the end.
 """
 
@@ -34,6 +36,7 @@ def write_graspgen(session: Session, exploration_id: int, out: BinaryIO,
     }
     out.write(json.dumps(head)[:-1].encode() + b', "grasps": {"transforms": [')
     success, from_grasp = bytearray(), bytearray()
+    lower: list[float | None] = []
     first = True
     for chunk in pose_chunks(session, exploration_id, mesh):
         body = json.dumps(chunk.transforms.tolist())[1:-1]
@@ -41,7 +44,9 @@ def write_graspgen(session: Session, exploration_id: int, out: BinaryIO,
         first = False
         success.extend(chunk.success.tolist())
         from_grasp.extend(chunk.from_grasp.tolist())
+        lower += [None if x != x else x for x in chunk.qualities["p_success_lower"].tolist()]
     out.write(f'], "object_in_gripper": {_flags(success)}}}, "graspscape": '
               f'{{"exploration_id": {exploration_id}, "poses": {len(success)}, '
-              f'"transform_from_grasp": {_flags(from_grasp)}}}}}'.encode())
+              f'"transform_from_grasp": {_flags(from_grasp)}, '
+              f'"p_success_lower": {json.dumps(lower)}}}}}'.encode())
     return len(success)

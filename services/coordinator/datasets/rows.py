@@ -28,6 +28,9 @@ CHUNK_ROWS = 2000
 # the stored grasp metrics and margins, and the robust map's robust success and quality
 # (manifolds/robust.py) (NaN where not computed).
 QUALITIES = ("mu_s", "effort_max_nm", *POSE_METRIC_COLUMNS, "robust_s", "robust_q")
+# P(success) under the exploration's uncertainty model, where the certification drew around
+# the pose (manifolds/p_success.py): k/n, the anytime-valid 95 % bounds, n (NaN elsewhere).
+SUCCESS_QUALITIES = ("p_success", "p_success_lower", "p_success_upper", "p_success_n")
 _POSE = (PoseRow.theta, PoseRow.phi, PoseRow.r, PoseRow.roll, PoseRow.pitch, PoseRow.yaw)
 
 
@@ -101,16 +104,19 @@ def pose_chunks(session: Session, exploration_id: int, mesh: Any | None,
                 chunk_rows: int | None = None) -> Iterator[Chunk]:
     """Every stored pose, in pose-key order, `chunk_rows` (default CHUNK_ROWS) at a time. A
     pose that formed no grasp needs `mesh` (a Conflict without it)."""
+    from graspscape.services.coordinator.manifolds.p_success import estimates
+
     starts = StartPoses(mesh) if mesh is not None else None
+    chances = estimates(session, exploration_id)
     columns = (PoseRow.pose_key, *_POSE, PoseRow.effective_r, PoseRow.outcome, PoseRow.viable,
                PoseRow.grasp, *(getattr(PoseRow, q) for q in QUALITIES))
     query = (select(*columns).where(PoseRow.exploration_id == exploration_id)
              .order_by(PoseRow.pose_key).execution_options(yield_per=chunk_rows or CHUNK_ROWS))
     for part in session.execute(query).partitions():
-        yield _chunk(part, starts)
+        yield _chunk(part, starts, chances)
 
 
-def _chunk(rows: Any, starts: StartPoses | None) -> Chunk:
+def _chunk(rows: Any, starts: StartPoses | None, chances: dict[str, Any]) -> Chunk:
     n = len(rows)
     poses = np.array([row[1:7] for row in rows], dtype=float).reshape(n, 6)
     from_grasp = np.array([row.grasp is not None for row in rows], dtype=bool)
@@ -126,6 +132,15 @@ def _chunk(rows: Any, starts: StartPoses | None) -> Chunk:
         pose_keys=[row.pose_key for row in rows], poses=poses, transforms=transforms,
         from_grasp=from_grasp, outcomes=[row.outcome for row in rows],
         success=np.array([bool(row.viable) for row in rows], dtype=bool),
-        qualities={q: np.array([np.nan if getattr(row, q) is None else getattr(row, q)
-                                for row in rows], dtype=float) for q in QUALITIES},
+        qualities={**{q: np.array([np.nan if getattr(row, q) is None else getattr(row, q)
+                                   for row in rows], dtype=float) for q in QUALITIES},
+                   **_success_columns([row.pose_key for row in rows], chances)},
     )
+
+
+def _success_columns(keys: list[str], chances: dict[str, Any]) -> dict[str, np.ndarray]:
+    def column(read: Any) -> np.ndarray:
+        return np.array([read(chances[k]) if k in chances else np.nan for k in keys],
+                        dtype=float)
+    return {"p_success": column(lambda e: e.p), "p_success_lower": column(lambda e: e.lower),
+            "p_success_upper": column(lambda e: e.upper), "p_success_n": column(lambda e: e.n)}

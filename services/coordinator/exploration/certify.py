@@ -62,7 +62,7 @@ REASON_PREFIX = "cert:"
 CLAIM_REASON = f"{REASON_PREFIX}core"
 # Certification rounds after local search at most: each waits for the round before it, and
 # each one more certifies only robust bests that the round before disqualified.
-MAX_ROUNDS = 4
+MAX_ROUNDS = 8
 
 
 def reason_for(centre_id: int) -> str:
@@ -173,6 +173,7 @@ def plan(
     budget_left: int,
     taken: set[str],
     radius_m: Callable[[Point], float],
+    race: Callable[[Manifold], list[Work]] | None = None,
 ) -> list[Work]:
     """One certification round over the large `manifolds` (the map's `large` flag: ≥ 1 % of
     the viable volume, manifolds/robust.large_manifolds).
@@ -181,8 +182,9 @@ def plan(
     or stored already. Two passes, each over the manifolds in order — the one holding the
     overall robust best first, then by label (largest first) — and each giving a manifold
     an even share of what is left (rounded up) among the manifolds still to come:
-    1. the returned grasps: the missing N_δ of each robust best, or, once that is wholly
-       known, its K jitters (those not planned yet);
+    1. the returned grasps: with `race` (exploration/racing.py), the draws of the uncertainty
+       model its race plans for the manifold's candidates; without, the missing N_δ of each
+       robust best, or, once that is wholly known, its K jitters (those not planned yet);
     2. the missing N_δ of each manifold's point-best candidates, in order."""
     left = budget_left
     bests = {m.label: robust_best(m.members, samples, scores) for m in manifolds}
@@ -196,6 +198,8 @@ def plan(
     out: list[Work] = []
 
     def returned(m: Manifold, best: Point) -> list[Work]:
+        if race is not None:
+            return race(m)
         missing = missing_neighbours(lattice, samples, best)
         if missing:
             return [Work(lattice.pose(q), q, best, m.label) for q in missing]

@@ -11,10 +11,10 @@ centre's key into the jitter's `certifies` column, which `/best` and the exports
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
-from graspscape.services.coordinator.exploration import certify
+from graspscape.services.coordinator.exploration import certify, racing
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.services.coordinator.exploration.samples import (
     lattice_of,
@@ -25,8 +25,9 @@ from graspscape.services.coordinator.exploration.strategies.base import Planned
 from graspscape.services.coordinator.exploration.symmetry import Orbits
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import FALLBACK_RADIUS, surface_radii
-from graspscape.services.coordinator.manifolds.robust import robust_scores
+from graspscape.services.coordinator.manifolds.robust import RobustScore, robust_scores
 from graspscape.services.coordinator.manifolds.service import ComputedMap
+from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
     ManifoldRow,
@@ -134,9 +135,10 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
     # move them where the results of the earlier ones showed the map to hold.
     grasps_spent = sum(1 for c in plans.values() if c is not None)
     grasps_room = total - math.ceil(cert.core_share * total - 1e-9) - grasps_spent
+    race = _race(session, exploration_id, spec, computed, scores)
     work = certify.plan(lattice, samples, manifolds, scores, cert,
                         budget_left=max(0, grasps_room), taken=taken,
-                        radius_m=lambda p: _radius(computed, p))
+                        radius_m=lambda p: _radius(computed, p), race=race)
     claims_left = total - len(plans) - len(work) if cert.core_share > 0 else 0
     last = round_ >= spec.refinement.local_search_rounds + certify.MAX_ROUNDS
     work += certify.claims(
@@ -166,6 +168,44 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
     return out
 
 
+def _race(session: Session, exploration_id: int, spec: ExplorationSpec, computed: ComputedMap,
+          scores: Mapping[Point, RobustScore]
+          ) -> Callable[[certify.Manifold], list[certify.Work]]:
+    """The race of each large manifold's candidates (exploration/racing.py) as plan work."""
+    samples = computed.samples
+
+    def race(m: certify.Manifold) -> list[certify.Work]:
+        cands = _candidates(session, exploration_id, spec, samples, m.members, scores,
+                            lambda p: _radius(computed, p))
+        return [certify.Work(q, None, p, m.label)
+                for p, poses in racing.race_round(cands) for q in poses]
+    return race
+
+
+def _candidates(session: Session, exploration_id: int, spec: ExplorationSpec,
+                samples: Mapping[Point, StoredPose], members: Sequence[Point],
+                scores: Mapping[Point, RobustScore], radius: Callable[[Point], float]
+                ) -> list[racing.Candidate]:
+    """A manifold's race candidates with their stored draws' estimates."""
+    points = racing.candidates(members, samples, scores, max(1, spec.certification.candidates))
+    seqs = {p: racing.draw_poses(samples[p], spec.uncertainty, radius(p),
+                                 racing.success.LOOKS[-1]) for p in points}
+    stored = stored_by_key(session, exploration_id, [q.key() for s in seqs.values() for q in s])
+    return racing.assess(points, samples, seqs.__getitem__, stored,
+                         level=spec.certification.level)
+
+
+def stored_by_key(session: Session, exploration_id: int, keys: Sequence[str]
+                  ) -> dict[str, StoredPose]:
+    """The stored poses among `keys` (the draws of a race: off the lattice), by key."""
+    out: dict[str, StoredPose] = {}
+    for chunk in _chunks(sorted(set(keys))):
+        for row in session.scalars(select(PoseRow).where(
+                PoseRow.exploration_id == exploration_id, PoseRow.pose_key.in_(chunk))):
+            out[row.pose_key] = StoredPose.from_row(row)
+    return out
+
+
 def _labels_at(computed: ComputedMap) -> dict[Point, int]:
     """The map's label of every finest point: a stored pose's manifold (−1 where it did not
     hold), else the interpolated fine label."""
@@ -186,7 +226,8 @@ def _ids_of_keys(session: Session, exploration_id: int, keys: set[str]) -> dict[
 
 # --- what a finished exploration claims ------------------------------------------------------
 class CertifiedBest(BaseModel):
-    """The robust best grasp of one large manifold, with what backs it."""
+    """The pick of one large manifold by P(success) (its raced candidate with the highest
+    lower bound; the robust best where none has draws), with what backs it."""
 
     label: str = Field(description="the manifold's name (A, B, …)")
     volume_cm3: float
@@ -201,9 +242,19 @@ class CertifiedBest(BaseModel):
     neighbours: int = Field(description="|N_δ|")
     known: int = Field(description="members of N_δ stored (evaluated or inferred)")
     held: int = Field(description="known members held with p's grasp type")
-    jitters: int = Field(description="jitters of the stated pose error evaluated around p")
-    jitters_held: int
-    certified: bool = Field(description="the robust claim (exploration/certify.py)")
+    jitters: int = Field(description="n: draws of the uncertainty model evaluated around p")
+    jitters_held: int = Field(description="k: of those, held with p's grasp type")
+    p_success: float | None = Field(default=None, description="k / n")
+    lower: float | None = Field(
+        default=None, description="anytime-valid 95 % lower bound of P(success)")
+    upper: float | None = Field(
+        default=None, description="anytime-valid 95 % upper bound of P(success)")
+    level: float = Field(default=0.9, description="the certification level")
+    model: str = Field(default="", description="the uncertainty model the numbers are under")
+    certified: bool = Field(
+        description="lower bound ≥ level at 95 % confidence under the stated model")
+    withheld: str | None = Field(
+        default=None, description="why no claim is made although the bound clears the level")
 
 
 def jitter_samples(session: Session, exploration_id: int, centres: Sequence[str]
@@ -218,7 +269,7 @@ def jitter_samples(session: Session, exploration_id: int, centres: Sequence[str]
 
 
 class RobustSummary(BaseModel):
-    """The large manifolds' robust best grasps, and the rest of the map as one line."""
+    """The large manifolds' picks, and the rest of the map as one line."""
 
     bests: list[CertifiedBest]
     dust_count: int = Field(description="manifolds under 1 % of the viable volume")
@@ -232,9 +283,8 @@ def robust_summary(session: Session, exploration_id: int) -> RobustSummary:
 
 def certified_bests(session: Session, exploration_id: int,
                     samples: Mapping[Point, StoredPose] | None = None) -> list[CertifiedBest]:
-    """The robust best grasp of every large manifold of the stored manifold table, largest
-    first, with its certification evidence (the manifold table must be current:
-    manifolds.service.ensure_manifolds)."""
+    """The pick of every large manifold of the stored manifold table, largest first, with
+    its evidence (the manifold table must be current: manifolds.service.ensure_manifolds)."""
     return _bests(session, exploration_id, samples)[0]
 
 
@@ -262,58 +312,74 @@ def _bests(session: Session, exploration_id: int,
     large_ids = {m.label for m in chosen}
     dust = [v for mid, v in volume.items() if mid not in large_ids]
     scores = robust_scores(lattice, samples, [p for m in chosen for p in m.members])
+    mesh = object_mesh(session, row.object_id)
+
+    def radius(p: Point) -> float:
+        return float(surface_radii(mesh, np.array([lattice.direction(p)]), FALLBACK_RADIUS)[0])
+
     by_id = {r.id: r for r in rows}
-    best: dict[int, Point] = {}
-    for m in chosen:
-        stored = by_id[m.label].robust_best_key
-        p = point_of.get(stored) if stored else None
-        p = p if p is not None else certify.robust_best(m.members, samples, scores)
-        if p is not None:
-            best[m.label] = p
-    shaken = jitter_samples(session, exploration_id, [samples[p].key for p in best.values()])
-    asked = spec.certification.jitters > 0 and (spec.certification.pose_error_mm > 0
-                                                 or spec.certification.pose_error_deg > 0)
     out = []
     for m in chosen:
-        if m.label not in best:
+        cands = _candidates(session, exploration_id, spec, samples, m.members, scores, radius)
+        pick = racing.best(cands)
+        stored = by_id[m.label].robust_best_key
+        p = pick.point if pick is not None else point_of.get(stored) if stored else None
+        p = p if p is not None else certify.robust_best(m.members, samples, scores)
+        if p is None:
             continue
-        p = best[m.label]
-        s = samples[p]
-        score = scores.get(p)
-        ev = certify.evidence(lattice, samples, p, score, shaken.get(s.key, []),
-                              jitters_asked=asked)
-        mrow = by_id[m.label]
-        core = mrow.core_volume_cm3
-        out.append(CertifiedBest(
-            label=(mrow.summary or {}).get("name", str(mrow.label)), volume_cm3=volume[m.label],
-            volume_share=volume[m.label] / viable_volume if viable_volume else 0.0,
-            core_volume_cm3=None if core is None else float(core),
-            pose=Pose(theta=s.theta, phi=s.phi, r=s.r, roll=s.roll, pitch=s.pitch, yaw=s.yaw),
-            key=s.key, s=None if score is None else score.s,
-            q=None if score is None else score.q, mu_s=s.mu_s, robust_label=ev.label,
-            neighbours=ev.neighbours, known=ev.known, held=ev.held, jitters=ev.jitters,
-            jitters_held=ev.jitters_held, certified=ev.certified))
+        out.append(_best(lattice, samples, p, scores.get(p), pick, by_id[m.label],
+                         volume[m.label], viable_volume, spec))
     return out, len(dust), sum(dust)
+
+
+def _best(lattice: Lattice, samples: Mapping[Point, StoredPose], p: Point,
+          score: RobustScore | None,
+          pick: racing.Candidate | None, mrow: ManifoldRow, volume: float,
+          viable_volume: float, spec: ExplorationSpec) -> CertifiedBest:
+    s = samples[p]
+    ev = certify.evidence(lattice, samples, p, score, [], jitters_asked=False)
+    e = pick.estimate if pick is not None and pick.point == p else None
+    model = spec.uncertainty
+    clears = e is not None and e.certified
+    withheld = None
+    if clears and not racing.simulated(model):
+        withheld = "the model's friction, mass or effort scales are not simulated here"
+    core = mrow.core_volume_cm3
+    return CertifiedBest(
+        label=(mrow.summary or {}).get("name", str(mrow.label)), volume_cm3=volume,
+        volume_share=volume / viable_volume if viable_volume else 0.0,
+        core_volume_cm3=None if core is None else float(core),
+        pose=Pose(theta=s.theta, phi=s.phi, r=s.r, roll=s.roll, pitch=s.pitch, yaw=s.yaw),
+        key=s.key, s=None if score is None else score.s,
+        q=None if score is None else score.q, mu_s=s.mu_s, robust_label=ev.label,
+        neighbours=ev.neighbours, known=ev.known, held=ev.held,
+        jitters=0 if e is None else e.n, jitters_held=0 if e is None else e.k,
+        p_success=None if e is None or not e.n else e.p,
+        lower=None if e is None else e.lower, upper=None if e is None else e.upper,
+        level=spec.certification.level, model=model.describe(),
+        certified=clears and withheld is None, withheld=withheld)
 
 
 def format_best(b: CertifiedBest) -> str:
     """One line of `graspscape explore`'s closing table."""
     core = "?" if b.core_volume_cm3 is None else f"{b.core_volume_cm3:.1f}"
     s = "?" if b.s is None else f"{b.s:.2f}"
-    q = "?" if b.q is None else f"{b.q:.3f}"
-    claim = "certified robust" if b.certified else f"not certified: {_why_not(b)}"
+    where = (f"θ {math.degrees(b.pose.theta):.1f}° φ {math.degrees(b.pose.phi):.1f}° "
+             f"r {1000 * b.pose.r:.1f} mm roll {math.degrees(b.pose.roll):.0f}°")
+    if b.lower is None or b.upper is None or not b.jitters:
+        chance = "P(success) not sampled"
+    else:
+        chance = (f"P(success) {b.jitters_held}/{b.jitters} = {b.p_success:.2f}, 95 % bounds "
+                  f"[{b.lower:.2f}, {b.upper:.2f}]")
     return (f"  {b.label}: {b.volume_cm3:.1f} cm³ ({100 * b.volume_share:.0f} %), core {core} "
-            f"cm³; s {s}, q {q}, μs {b.mu_s:.3f} at θ {math.degrees(b.pose.theta):.1f}° "
-            f"φ {math.degrees(b.pose.phi):.1f}° r {1000 * b.pose.r:.1f} mm roll "
-            f"{math.degrees(b.pose.roll):.0f}°; N_δ {b.known}/{b.neighbours} known, "
-            f"{b.held} held; jitters {b.jitters_held}/{b.jitters} held; {claim}")
+            f"cm³; s {s}, μs {b.mu_s:.3f} at {where}; {chance}; {_claim(b)}")
 
 
-def _why_not(b: CertifiedBest) -> str:
-    if b.known < b.neighbours:
-        return f"{b.neighbours - b.known} of N_δ not evaluated"
-    if b.robust_label != "robust":
-        return str(b.robust_label)
-    if not b.jitters:
-        return "no jitters evaluated"
-    return "jitters dropped"
+def _claim(b: CertifiedBest) -> str:
+    if b.certified:
+        return f"certified: P ≥ {b.level:g} at 95 % under {b.model}"
+    if b.withheld:
+        return f"not certified ({b.withheld})"
+    if b.upper is not None and b.upper < b.level:
+        return f"not certified: P < {b.level:g} at 95 %"
+    return f"not certified: undecided at P ≥ {b.level:g}"

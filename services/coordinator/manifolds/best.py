@@ -70,6 +70,9 @@ class Rank(StrEnum):
     ROBUST = "robust"
     # The pointwise ranking: DEFAULT_RANK below, the pose's own value.
     POINT = "point"
+    # P(success) under the exploration's uncertainty model (manifolds/p_success.py): poses
+    # with draws by the lower bound, then k/n; the others after them in the robust order.
+    P_SUCCESS = "p_success"
 
 
 # The ranking of /best and best_poses when none is asked for: the torque margin, which every
@@ -78,9 +81,9 @@ class Rank(StrEnum):
 # benchmarks/results/metric_validity.json, docs/metrics.md "What /best ranks by"); it is kept,
 # shown beside, and breaks ties — and ranks alone where the margin was not measured.
 DEFAULT_RANK = Rank.TORQUE_MARGIN_RATIO
-# What /best ranks by when none is asked for: the grasp that survives the robot's pose error
-# (issue 18). rank=point gives DEFAULT_RANK, the pose's own value.
-BEST_DEFAULT_RANK = Rank.ROBUST
+# What /best ranks by when none is asked for: the grasp most likely to succeed under the
+# stated errors, by the lower bound of P(success). rank=point gives DEFAULT_RANK.
+BEST_DEFAULT_RANK = Rank.P_SUCCESS
 # Where a lower value is the better grasp: it still holds with less friction or less effort.
 LOWER_IS_BETTER = frozenset({Rank.FRICTION_MARGIN, Rank.TORQUE_MARGIN_NM})
 
@@ -116,6 +119,10 @@ def best_poses(
     rank = Rank(rank)
     if rank == Rank.POINT:
         rank = DEFAULT_RANK
+    if rank == Rank.P_SUCCESS:
+        return _best_p_success(session, exploration_id, label=label, cone_axis=cone_axis,
+                               cone_half_angle=cone_half_angle, max_effort_nm=max_effort_nm,
+                               limit=limit, coarser=coarser)
     if rank == Rank.ROBUST and coarser > 0:
         return _best_robust_coarser(session, exploration_id, label=label, cone_axis=cone_axis,
                                     cone_half_angle=cone_half_angle,
@@ -145,6 +152,27 @@ def _ranking(rank: Rank) -> queries.Ranking:
                                group_order=tuple(label.value for label in
                                                  sorted(RobustLabel, key=LABEL_ORDER.get)))
     return queries.Ranking(rank.value, lower_is_better=rank in LOWER_IS_BETTER)
+
+
+def _best_p_success(session: Session, exploration_id: int, *, label: int | None,
+                    cone_axis: tuple[float, float, float] | None, cone_half_angle: float | None,
+                    max_effort_nm: float | None, limit: int, coarser: int) -> list[PoseRow]:
+    """Poses with draws by the lower bound of P(success) (then k/n, μs, key), then the rest
+    by the robust order, each passing the filters."""
+    # Imported here: p_success reads the certification's store module, which imports the
+    # manifold service, which this module's importers load first.
+    from graspscape.services.coordinator.manifolds.p_success import estimates
+
+    est = estimates(session, exploration_id)
+    filters = dict(label=label, cone_axis=cone_axis, cone_half_angle=cone_half_angle,
+                   max_effort_nm=max_effort_nm)
+    drawn = [r for r in best_poses(session, exploration_id, limit=2**62, rank=Rank.MU_S,
+                                   **filters) if r.pose_key in est] if est else []
+    drawn.sort(key=lambda r: (-est[r.pose_key].lower, -est[r.pose_key].p, -r.mu_s, r.pose_key))
+    rest = best_poses(session, exploration_id, limit=limit + len(drawn), rank=Rank.ROBUST,
+                      coarser=coarser, **filters)
+    keys = {r.pose_key for r in drawn}
+    return (drawn + [r for r in rest if r.pose_key not in keys])[:limit]
 
 
 def _best_robust_coarser(session: Session, exploration_id: int, *, label: int | None,

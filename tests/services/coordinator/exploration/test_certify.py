@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from graspscape.services.coordinator.exploration import certify
+from graspscape.services.coordinator.exploration import certify, success
 from graspscape.services.coordinator.exploration.accounting import exploration_budget
 from graspscape.services.coordinator.exploration.certify_store import (
     certification_plans,
@@ -50,9 +50,14 @@ GRID = PoseGridSpec(dtheta=0.6, r_min=0.0, r_max=0.02, dr=0.01)
 LATTICE = Lattice(GRID, 1)
 # A coarse point (θ = 2π/5, r = 0) that the "lone" oracle holds alone.
 LONE = Point(LATTICE.scale(0) * 2, 0, 0, 0)
-# Certification with room for N_δ and the jitters on a ~100-pose exploration.
+# Certification with room for N_δ and the jitters on a ~100-pose exploration (the pure plan
+# tests, jitters without a race).
 CERT = CertificationSpec(share=0.5, candidates=1, pose_error_mm=2.0, pose_error_deg=2.0,
                          jitters=4)
+# Through the store: the race's draws, with room for one candidate's 48 draws (the least
+# that certifies P ≥ 0.9 under the sequential rule).
+RACE = CertificationSpec(share=0.5, core_share=0.0, candidates=1)
+FIRST = success.LOOKS[0]
 
 
 # --- pure ----------------------------------------------------------------------------------
@@ -142,7 +147,7 @@ def test_plan_shares_the_budget_returned_grasps_first_overall_best_first() -> No
 
 
 def test_budget_is_a_share_of_the_other_planned_poses() -> None:
-    assert certify.budget(CertificationSpec(), 1000) == 50
+    assert certify.budget(CertificationSpec(), 1000) == 350  # ≤ 40 % more evaluations
     assert certify.budget(CertificationSpec(share=0.0), 1000) == 0
     assert certify.budget(CertificationSpec(share=0.5), 7) == 3
     assert certify.centre_id_of(certify.reason_for(12345)) == 12345
@@ -241,7 +246,7 @@ def _cap(pose: Pose) -> PoseResult:
 
 def _explore(sessions, object_id: int, oracle, *, workers: int = 2, seed: int = 1,
              search_rounds: int = 3) -> int:
-    spec = ExplorationSpec(object_id=object_id, grid=GRID, certification=CERT,
+    spec = ExplorationSpec(object_id=object_id, grid=GRID, certification=RACE,
                            refinement={"levels": 1, "local_search_rounds": search_rounds})
 
     def evaluate(poses, match=None):  # type: ignore[no-untyped-def]
@@ -269,7 +274,7 @@ def _sphere(sessions) -> int:
 
 # SQLite only, to stay in the default suite (~1.5 s); the slow test below runs the same
 # machinery on both databases.
-def test_a_lone_held_pose_is_never_claimed_robust(sqlite_sessions) -> None:
+def test_a_lone_held_pose_is_never_certified(sqlite_sessions) -> None:
     sessions = sqlite_sessions
     eid = _explore(sessions, _sphere(sessions), _lone)
     lone_key = LATTICE.pose(LONE).key()
@@ -283,26 +288,27 @@ def test_a_lone_held_pose_is_never_claimed_robust(sqlite_sessions) -> None:
         top = best_poses(s, eid, rank=Rank.ROBUST, limit=10)
         top_evidence = robust_evidence(s, eid, top)
         printed = robust_lines(robust_summary(s, eid))
-    # It is the only grasp, so the only (large) manifold's best: certification completed its
-    # neighbourhood and jittered it, and every neighbour and jitter dropped.
+    # It is the only grasp, so the only (large) manifold's candidate: its first look of draws
+    # all dropped, so the upper bound fell below the level and the race stopped.
     assert [b.key for b in bests] == [lone_key]
     (best,) = bests
     assert best.neighbours == len(neighbourhood(LATTICE, LONE))
     assert (best.known, best.held) == (best.neighbours, 0)
-    assert len(jitters) == CERT.jitters and not any(j.viable for j in jitters)
-    assert (best.jitters, best.jitters_held) == (CERT.jitters, 0)
-    assert best.robust_label != "robust" and not best.certified
-    assert [r.pose_key for r in top] == [lone_key]  # the jitters all dropped
+    assert len(jitters) == FIRST and not any(j.viable for j in jitters)
+    assert (best.jitters, best.jitters_held, best.p_success) == (FIRST, 0, 0.0)
+    assert best.lower == 0.0 and best.upper is not None and best.upper < RACE.level
+    assert not best.certified and best.robust_label != "robust"
+    assert [r.pose_key for r in top] == [lone_key]  # the draws all dropped
     assert top_evidence[0].score.label != RobustLabel.ROBUST
-    assert (top_evidence[0].certifying, top_evidence[0].certifying_held) == (CERT.jitters, 0)
+    assert (top_evidence[0].certifying, top_evidence[0].certifying_held) == (FIRST, 0)
     # `graspscape explore` prints it so.
-    assert "A: " in printed and f"N_δ {best.known}/{best.known} known, 0 held; jitters " \
-        f"0/{CERT.jitters} held; not certified: {best.robust_label}" in printed
-    # Border refinement had evaluated its neighbours already (they all differ from it): the
-    # certification's own evaluations are the jitters, and the budget counts them.
+    assert "A: " in printed and f"P(success) 0/{FIRST} = 0.00, 95 % bounds [0.00, " \
+        f"{best.upper:.2f}]; not certified: P < 0.9 at 95 %" in printed
+    # Border refinement had evaluated its neighbours already: the certification's own
+    # evaluations are the draws, and the budget counts them.
     plan = _plan_of(sessions, eid)
     assert {c for _, c in plan} == {lone_key}
-    assert budget.certification_evaluations == len(plan) == CERT.jitters
+    assert budget.certification_evaluations == len(plan) == FIRST
 
 
 @pytest.mark.slow  # two whole explorations per database
@@ -316,18 +322,23 @@ def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
     # One large manifold (the cap); LONE is dust and never returned.
     assert len(bests) == 1 and bests[0].key != LATTICE.pose(LONE).key()
     (best,) = bests
-    assert best.certified and best.robust_label == "robust"
-    assert best.known == best.neighbours == best.held
-    assert best.jitters == best.jitters_held == CERT.jitters
-    # GET /best (rank=robust by default) answers the same grasp, with the same evidence.
-    answer = client.get(f"/explorations/{eid}/best").json()["poses"][0]
-    assert (answer["pose_key"], answer["robust_label"]) == (best.key, "robust")
+    # 48 straight successes: the sequential rule's lower bound clears 0.9 at its third look.
+    assert best.certified and best.lower is not None and best.lower >= RACE.level
+    assert best.jitters == best.jitters_held == success.LOOKS[2]
+    # GET /best (rank=robust) answers the same grasp, with the same evidence.
+    answer = client.get(f"/explorations/{eid}/best?rank=robust").json()["poses"][0]
+    assert answer["pose_key"] == best.key
     assert answer["evidence"]["certifying"] == answer["evidence"]["certifying_held"] == \
-        CERT.jitters
-    # Certification completed N_δ itself (refinement evaluated nothing inside the region).
+        success.LOOKS[2]
+    # GET /best (rank=p_success, the default): the certified grasp first, with k, n, bounds.
+    default = client.get(f"/explorations/{eid}/best").json()
+    assert default["rank"] == "p_success" and default["level"] == RACE.level
+    first = default["poses"][0]
+    assert first["pose_key"] == best.key
+    assert (first["success"]["k"], first["success"]["n"]) == (success.LOOKS[2],) * 2
+    assert first["success"]["certified"] and first["success"]["lower"] == best.lower
     plan = _plan_of(sessions, eid)
-    members = {LATTICE.pose(q).key() for q in neighbourhood(LATTICE, LATTICE.point(best.pose))}
-    assert members & {k for k, c in plan if c == best.key}
+    assert sum(1 for _, c in plan if c == best.key) == success.LOOKS[2]
     # Same spec, other worker count and report order: the same certification plan.
     again = _explore(sessions, object_id, _cap, workers=3, seed=7, search_rounds=0)
     assert _plan_of(sessions, again) == plan

@@ -105,9 +105,14 @@ def _check_best(client: TestClient, sessions, explored: tuple[int, str, str]) ->
     assert ev["neighbours_held"] == 0
     assert lone["robust_s"] == pytest.approx(1 / (ev["neighbours"] + 1))
     assert lone["robust_label"] in ("fragile", "futile")
-    # Robust (the default): the top of the cap, whose whole neighbourhood holds.
-    robust = _best(client, eid, limit=3)
+    # Robust: the top of the cap, whose whole neighbourhood holds.
+    robust = _best(client, eid, limit=3, rank="robust")
     assert (robust["rank"], robust["delta_steps"]) == ("robust", 1)
+    # P(success) (the default): nothing was drawn here, so the robust order, no claim.
+    default = _best(client, eid, limit=3)
+    assert default["rank"] == "p_success" and default["uncertainty"]["preset"] == "lab"
+    assert [p["pose_key"] for p in default["poses"]] == [p["pose_key"] for p in robust["poses"]]
+    assert all(p["success"] is None for p in default["poses"])
     assert robust["delta_deg"] == pytest.approx(STEP_DEG)
     top = robust["poses"][0]
     assert top["pose_key"] == north and top["robust_label"] == "robust"

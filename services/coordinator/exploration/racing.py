@@ -1,0 +1,103 @@
+"""Sequential certification of P(success) in the adaptive strategy's rounds (pure functions).
+
+Per large manifold, the robust map chooses the candidates: its best `count` members by the
+robust order (robust before uncertain, fragile, futile; then q_δ, μs — high s_δ and q_δ, deep
+in the manifold). Each candidate's draws are the poses of its seeded sequence under the
+exploration's uncertainty model (shared/specs/uncertainty.py): draw i of the centre's key,
+the start moved by the draw's pose error. A draw succeeds when it is stored held with the
+centre's grasp type (the digits in contact). Each round, the race (exploration/success.py:
+LUCB over anytime-valid Clopper–Pearson bounds) names the candidates to sample, and each is
+planned up to its next look; the round after reads what was stored.
+
+The service's workers simulate a draw's start pose; a model's friction, mass and effort
+scales are not sent with a pose, so a claim is made only under a model without them
+(`simulated`); under one with them the bounds are reported and the claim withheld.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+from graspscape.services.coordinator.exploration import success
+from graspscape.services.coordinator.exploration.lattice import Point
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.robust import RobustScore
+from graspscape.services.coordinator.manifolds.summary import robust_order
+from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.uncertainty import UncertaintyModel, draws, perturbed
+
+
+def simulated(model: UncertaintyModel) -> bool:
+    """Whether the service's draws simulate the whole model (its scales are all 1)."""
+    return all(r == (1.0, 1.0) for r in (model.friction_scale, model.mass_scale,
+                                          model.effort_scale))
+
+
+def draw_poses(centre: StoredPose, model: UncertaintyModel, radius_m: float, n: int,
+               start: int = 0) -> list[Pose]:
+    """The start poses of draws start … start + n − 1 of the centre's sequence."""
+    pose = Pose(theta=centre.theta, phi=centre.phi, r=centre.r, roll=centre.roll,
+                pitch=centre.pitch, yaw=centre.yaw)
+    return [perturbed(pose, d, radius_m) for d in draws(centre.key, model, n, start=start)]
+
+
+def success_of(centre: StoredPose, drawn: StoredPose) -> bool:
+    """Held along the reference trajectory with the centre's grasp type."""
+    return drawn.viable and centre.viable and drawn.digits == centre.digits
+
+
+def outcomes(centre: StoredPose, poses: Sequence[Pose], stored: Mapping[str, StoredPose]
+             ) -> list[bool]:
+    """The stored draws' successes in draw order, up to the first not stored."""
+    out = []
+    for q in poses:
+        s = stored.get(q.key())
+        if s is None:
+            break
+        out.append(success_of(centre, s))
+    return out
+
+
+def candidates(members: Sequence[Point], samples: Mapping[Point, StoredPose],
+               scores: Mapping[Point, RobustScore], count: int) -> list[Point]:
+    """The manifold's best `count` viable members by the robust order."""
+    scored = [p for p in members if p in scores and samples[p].viable]
+    return sorted(scored, key=lambda p: robust_order(samples[p], scores[p]))[:count]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    point: Point
+    sequence: tuple[Pose, ...]  # the first `success.LOOKS[-1]` draws' start poses
+    estimate: success.Estimate
+
+
+def assess(points: Sequence[Point], samples: Mapping[Point, StoredPose],
+           sequence: Callable[[Point], Sequence[Pose]], stored: Mapping[str, StoredPose],
+           *, level: float) -> list[Candidate]:
+    """Each candidate's estimate from its stored draws."""
+    out = []
+    for p in points:
+        seq = tuple(sequence(p))
+        done = outcomes(samples[p], seq, stored)
+        out.append(Candidate(p, seq, success.estimate(done, level=level)))
+    return out
+
+
+def race_round(cands: Sequence[Candidate]) -> list[tuple[Point, list[Pose]]]:
+    """The draws one round plans for a manifold: the race's chosen candidates, each up to its
+    next look (the draws not stored yet)."""
+    out = []
+    for i in success.race([c.estimate for c in cands]):
+        c = cands[i]
+        target = success.next_look(c.estimate.n)
+        if target is not None:
+            out.append((c.point, list(c.sequence[c.estimate.n:target])))
+    return out
+
+
+def best(cands: Sequence[Candidate]) -> Candidate | None:
+    """The manifold's pick by P(success): the highest lower bound, then k/n, with draws."""
+    drawn = [c for c in cands if c.estimate.n]
+    return max(drawn, key=lambda c: (c.estimate.lower, c.estimate.p), default=None)
