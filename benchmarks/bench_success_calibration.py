@@ -4,7 +4,7 @@ Per object: one default `graspscape explore` run (20°, r 1–3 cm, one refineme
 roll, the exploration's torque margin on every held pose) with its certification stage off
 (the uncertified run). Per uncertainty model (`lab`, `field`): in each large manifold, the
 robust map's best candidates (robust order: label, q_δ, μs) race for draws
-(exploration/success.py: Clopper–Pearson bounds, Bonferroni spending over the looks 12/24/48/96,
+(mapspace/success.py: Clopper–Pearson bounds, Bonferroni spending over the looks 12/24/48/96,
 LUCB racing); a draw is an outcome-only simulation (workers/sim/samples.py) of the start pose
 moved by one draw of the model, with the model's friction, mass and effort scales; success =
 held with the centre's grasp type. The poses scored: the top 3 per large manifold by each
@@ -32,12 +32,12 @@ from pathlib import Path
 
 import numpy as np
 from graspscape.services.coordinator import db
-from graspscape.services.coordinator.exploration import success
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.behaviour import digit
 from graspscape.services.coordinator.manifolds.grouping import FALLBACK_RADIUS, surface_radii
 from graspscape.services.coordinator.manifolds.service import compute_map
 from graspscape.services.coordinator.manifolds.summary import robust_order
+from graspscape.services.coordinator.mapspace import success
 from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.services.local.compose import store_object
 from graspscape.services.local.defaults import DEFAULT_DTHETA_DEG, DEFAULT_LEVELS, DEFAULT_R

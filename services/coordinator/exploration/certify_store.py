@@ -27,6 +27,7 @@ from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import FALLBACK_RADIUS, surface_radii
 from graspscape.services.coordinator.manifolds.robust import RobustScore, robust_scores
 from graspscape.services.coordinator.manifolds.service import ComputedMap
+from graspscape.services.coordinator.mapspace.samples import stored_by_key
 from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import (
     ExplorationRow,
@@ -193,17 +194,6 @@ def _candidates(session: Session, exploration_id: int, spec: ExplorationSpec,
     stored = stored_by_key(session, exploration_id, [q.key() for s in seqs.values() for q in s])
     return racing.assess(points, samples, seqs.__getitem__, stored,
                          level=spec.certification.level)
-
-
-def stored_by_key(session: Session, exploration_id: int, keys: Sequence[str]
-                  ) -> dict[str, StoredPose]:
-    """The stored poses among `keys` (the draws of a race: off the lattice), by key."""
-    out: dict[str, StoredPose] = {}
-    for chunk in _chunks(sorted(set(keys))):
-        for row in session.scalars(select(PoseRow).where(
-                PoseRow.exploration_id == exploration_id, PoseRow.pose_key.in_(chunk))):
-            out[row.pose_key] = StoredPose.from_row(row)
-    return out
 
 
 def _labels_at(computed: ComputedMap) -> dict[Point, int]:

@@ -5,7 +5,7 @@ robust order (robust before uncertain, fragile, futile; then q_δ, μs — high 
 in the manifold). Each candidate's draws are the poses of its seeded sequence under the
 exploration's uncertainty model (shared/specs/uncertainty.py): draw i of the centre's key,
 the start moved by the draw's pose error. A draw succeeds when it is stored held with the
-centre's grasp type (the digits in contact). Each round, the race (exploration/success.py:
+centre's grasp type (the digits in contact). Each round, the race (mapspace/success.py:
 LUCB over anytime-valid Clopper–Pearson bounds) names the candidates to sample, and each is
 planned up to its next look; the round after reads what was stored.
 
@@ -19,44 +19,18 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-from graspscape.services.coordinator.exploration import success
 from graspscape.services.coordinator.exploration.lattice import Point
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.robust import RobustScore
 from graspscape.services.coordinator.manifolds.summary import robust_order
+from graspscape.services.coordinator.mapspace import success
+from graspscape.services.coordinator.mapspace.draws import (  # noqa: F401  (the race's vocabulary)
+    draw_poses,
+    outcomes,
+    simulated,
+    success_of,
+)
 from graspscape.shared.specs.pose import Pose
-from graspscape.shared.specs.uncertainty import UncertaintyModel, draws, perturbed
-
-
-def simulated(model: UncertaintyModel) -> bool:
-    """Whether the service's draws simulate the whole model (its scales are all 1)."""
-    return all(r == (1.0, 1.0) for r in (model.friction_scale, model.mass_scale,
-                                          model.effort_scale))
-
-
-def draw_poses(centre: StoredPose, model: UncertaintyModel, radius_m: float, n: int,
-               start: int = 0) -> list[Pose]:
-    """The start poses of draws start … start + n − 1 of the centre's sequence."""
-    pose = Pose(theta=centre.theta, phi=centre.phi, r=centre.r, roll=centre.roll,
-                pitch=centre.pitch, yaw=centre.yaw)
-    return [perturbed(pose, d, radius_m) for d in draws(centre.key, model, n, start=start)]
-
-
-def success_of(centre: StoredPose, drawn: StoredPose) -> bool:
-    """Held along the reference trajectory with the centre's grasp type."""
-    return drawn.viable and centre.viable and drawn.digits == centre.digits
-
-
-def outcomes(centre: StoredPose, poses: Sequence[Pose], stored: Mapping[str, StoredPose]
-             ) -> list[bool]:
-    """The stored draws' successes in draw order, up to the first not stored."""
-    out = []
-    for q in poses:
-        s = stored.get(q.key())
-        if s is None:
-            break
-        out.append(success_of(centre, s))
-    return out
 
 
 def candidates(members: Sequence[Point], samples: Mapping[Point, StoredPose],

@@ -1,8 +1,8 @@
 """P(success) of the poses the certification drew around: /best's default ranking.
 
 A pose's draws are the stored poses of its seeded sequence under the exploration's
-uncertainty model (exploration/racing.py); read in draw order, they give k of n and the
-sequential rule's anytime-valid bounds (exploration/success.py). `rank=p_success` ranks the
+uncertainty model (mapspace/draws.py); read in draw order, they give k of n and the
+sequential rule's anytime-valid bounds (mapspace/success.py). `rank=p_success` ranks the
 poses with draws by their lower bound (then k/n, μs, key), and the poses without draws after
 them in the robust order (they have no P(success) to rank by).
 """
@@ -12,11 +12,14 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 import numpy as np
-from graspscape.services.coordinator.exploration import racing, success
-from graspscape.services.coordinator.exploration.certify_store import stored_by_key
-from graspscape.services.coordinator.exploration.samples import lattice_of, load_samples
-from graspscape.services.coordinator.exploration.specs import spec_of
 from graspscape.services.coordinator.manifolds.grouping import FALLBACK_RADIUS, surface_radii
+from graspscape.services.coordinator.mapspace import draws, success
+from graspscape.services.coordinator.mapspace.samples import (
+    lattice_of,
+    load_samples,
+    stored_by_key,
+)
+from graspscape.services.coordinator.mapspace.specs import spec_of
 from graspscape.services.coordinator.objects.geometry import object_mesh
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
 from graspscape.shared.specs.uncertainty import UncertaintyModel
@@ -63,14 +66,14 @@ def estimates(session: Session, exploration_id: int,
     seqs = {}
     for p, s in samples.items():
         radius = float(surface_radii(mesh, np.array([lattice.direction(p)]), FALLBACK_RADIUS)[0])
-        seqs[s.key] = (s, racing.draw_poses(s, spec.uncertainty, radius, success.LOOKS[-1]))
+        seqs[s.key] = (s, draws.draw_poses(s, spec.uncertainty, radius, success.LOOKS[-1]))
     keys_drawn = [q.key() for _, seq in seqs.values() for q in seq]
     stored = stored_by_key(session, exploration_id, keys_drawn)
     level = spec.certification.level
     out = {}
     for key, (centre, seq) in seqs.items():
-        e = success.estimate(racing.outcomes(centre, seq, stored), level=level)
+        e = success.estimate(draws.outcomes(centre, seq, stored), level=level)
         if e.n:
             out[key] = SuccessOut(k=e.k, n=e.n, p=e.p, lower=e.lower, upper=e.upper,
-                                  certified=e.certified and racing.simulated(spec.uncertainty))
+                                  certified=e.certified and draws.simulated(spec.uncertainty))
     return out

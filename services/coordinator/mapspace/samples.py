@@ -7,7 +7,7 @@ take no part in lattice decisions or manifolds (docs/exploration.md, "Strategies
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 from graspscape.services.coordinator.mapspace.pose import StoredPose
@@ -74,4 +74,16 @@ def load_samples(
             p = point_or_none(lattice, pose)
             if p is not None:
                 out[p] = sample
+    return out
+
+
+def stored_by_key(session: Session, exploration_id: int, keys: Sequence[str]
+                  ) -> dict[str, StoredPose]:
+    """The stored poses among `keys` (the draws of a race: off the lattice), by key."""
+    out: dict[str, StoredPose] = {}
+    ordered = sorted(set(keys))
+    for chunk in (ordered[i : i + _KEY_CHUNK] for i in range(0, len(ordered), _KEY_CHUNK)):
+        for row in session.scalars(select(PoseRow).where(
+                PoseRow.exploration_id == exploration_id, PoseRow.pose_key.in_(chunk))):
+            out[row.pose_key] = StoredPose.from_row(row)
     return out

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from graspscape.services.coordinator.exploration import certify, success
+from graspscape.services.coordinator.exploration import certify
 from graspscape.services.coordinator.exploration.accounting import exploration_budget
 from graspscape.services.coordinator.exploration.certify_store import (
     certification_plans,
@@ -31,6 +31,7 @@ from graspscape.services.coordinator.manifolds.robust import (
     neighbourhood,
     robust_scores,
 )
+from graspscape.services.coordinator.mapspace import success
 from graspscape.services.coordinator.objects.service import create_named
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
 from graspscape.services.local.explore import robust_lines

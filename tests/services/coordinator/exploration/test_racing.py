@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from graspscape.services.coordinator.exploration import racing, success
+from graspscape.services.coordinator.exploration import racing
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.mapspace import success
 from graspscape.shared.specs.uncertainty import UncertaintyModel
 
 

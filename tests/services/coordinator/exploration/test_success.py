@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from graspscape.services.coordinator.exploration import success
+from graspscape.services.coordinator.mapspace import success
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.uncertainty import UncertaintyModel, draws, perturbed
 
