@@ -76,3 +76,8 @@ def test_the_cli_reference_is_what_the_parsers_say() -> None:
 def test_the_rest_reference_is_what_the_openapi_schema_says() -> None:
     assert reference_pages.REST_PAGE.read_text() == reference_pages.rest_page(), (
         "docs/reference/rest.md is stale: run .venv/bin/python benchmarks/reference_pages.py")
+
+
+def test_the_settings_reference_is_what_the_settings_say() -> None:
+    assert reference_pages.SETTINGS_PAGE.read_text() == reference_pages.settings_page(), (
+        "docs/reference/settings.md is stale: run .venv/bin/python benchmarks/reference_pages.py")
