@@ -1,5 +1,5 @@
 """The exports' gripper frame re-expressed in each shipped gripper's base link and in the
-ACRONYM convention; docs/datasets.md's table says the same as the functions."""
+ACRONYM convention; docs/reference/formats.md's table says the same as the functions."""
 
 from __future__ import annotations
 
@@ -15,11 +15,11 @@ from graspscape.shared.specs.gripper_frames import (
     to_base_link,
 )
 
-DOCS = Path(__file__).resolve().parents[3] / "docs" / "datasets.md"
+DOCS = Path(__file__).resolve().parents[3] / "docs" / "reference" / "formats.md"
 
 
 def table_row(name: str) -> str:
-    """The row docs/datasets.md carries for a gripper."""
+    """The row docs/reference/formats.md carries for a gripper."""
     m = np.round(to_base_link(load_gripper(name)), 4) + 0.0  # no -0
     rows = "; ".join(" ".join(f"{v:g}" for v in row) for row in m[:3])
     return f"| `{name}` | {base_depth_m(load_gripper(name)) * 1000:g} | `[{rows}]` |"
