@@ -23,6 +23,7 @@ from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds import best as ranking
 from graspscape.services.coordinator.manifolds import export, p_success
 from graspscape.services.coordinator.manifolds import service as manifolds
+from graspscape.services.coordinator.manifolds.grouping import label_name as manifold_name
 from graspscape.services.coordinator.manifolds.p_success import SuccessOut
 from graspscape.services.coordinator.manifolds.robust import coarser_for_error, error_in_steps
 from graspscape.services.coordinator.manifolds.summary import (
@@ -52,12 +53,24 @@ class DustLine(BaseModel):
     volume_cm3: float
 
 
+class ManifoldSuccess(BaseModel):
+    """A large manifold's best grasp by P(success): what /best?manifold=L answers first."""
+
+    pose_key: str
+    success: SuccessOut | None = Field(description="its P(success) under the exploration's "
+                                       "uncertainty model; null where nothing was drawn")
+
+
 class ManifoldList(BaseModel):
     exploration_id: int
     final: bool = Field(description="true once the exploration completed")
     manifolds: list[ManifoldSummary]
     dust: DustLine | None = Field(default=None, description="the manifolds that are not "
                                   "`large` (under 1 % of the viable volume) as one entry")
+    success: dict[str, ManifoldSuccess] = Field(
+        default_factory=dict, description="by label, each large manifold's best grasp by "
+        "rank=p_success with its k of n draws, bounds and claim (a manifold whose best has "
+        "no certified claim says so with certified false)")
 
 
 def _dust(items: list[ManifoldSummary]) -> DustLine | None:
@@ -138,6 +151,20 @@ def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
     return _json(answers.answer(key, lambda: _manifolds_body(session, exploration_id)))
 
 
+def _manifold_successes(session: Any, exploration_id: int,
+                        labels: list[int]) -> dict[str, ManifoldSuccess]:
+    """The first answer of /best?manifold=L (rank p_success) of each label, with P(success)."""
+    firsts = {}
+    for number in labels:
+        rows = ranking.best_poses(session, exploration_id, label=number, limit=1,
+                                  rank=ranking.Rank.P_SUCCESS)
+        if rows:
+            firsts[manifold_name(number)] = rows[0].pose_key
+    chances = p_success.estimates(session, exploration_id, firsts.values()) if firsts else {}
+    return {name: ManifoldSuccess(pose_key=key, success=chances.get(key))
+            for name, key in firsts.items()}
+
+
 def _manifolds_body(session: Any, exploration_id: int) -> bytes:
     # The summaries' stored JSON text copied into the answer, the dust line from columns:
     # nothing decoded, validated or encoded again (issue 21; migration 0012).
@@ -147,16 +174,20 @@ def _manifolds_body(session: Any, exploration_id: int) -> bytes:
                      volume_cm3=round(sum(m.volume_cm3 for m in small), 3)).model_dump()
             if small else None)
     head = json.dumps({"exploration_id": exploration_id, "final": final})[:-1]
+    success = _manifold_successes(session, exploration_id, [m.label for m in items if m.large])
+    tail = json.dumps({k: v.model_dump(mode="json") for k, v in success.items()})
     return (f'{head}, "manifolds": [{", ".join(m.summary for m in items)}], '
-            f'"dust": {json.dumps(dust)}}}'.encode())
+            f'"dust": {json.dumps(dust)}, "success": {tail}}}'.encode())
 
 
 def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
     """The list as models (the JSON export adds its short rows to it)."""
     items = manifolds.stored_manifolds(session, exploration_id)
+    success = _manifold_successes(session, exploration_id,
+                                  [m.label for m in items if m.large])
     return ManifoldList(exploration_id=exploration_id,
                         final=manifolds.is_final(session, exploration_id),
-                        manifolds=items, dust=_dust(items))
+                        manifolds=items, dust=_dust(items), success=success)
 
 
 @router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
@@ -360,4 +391,14 @@ def export_parquet(exploration_id: Id, request: Request, session: SessionDep) ->
             summary="The manifold table (summaries and short rows), JSON")
 def export_manifolds(exploration_id: Id, session: SessionDep) -> Any:
     listed = _manifold_list(exploration_id, session)
-    return ManifoldTable(**dict(listed), table=table_rows_of(listed.manifolds))
+    rows = table_rows_of(listed.manifolds)
+    for row in rows:  # the P(success) of each large manifold's best grasp beside its scores
+        chance = listed.success.get(row["label"])
+        e = chance.success if chance is not None else None
+        if row["label"] != "dust":
+            row.update(p_success_best=chance.pose_key if chance else None,
+                       p_success_k=e.k if e else None, p_success_n=e.n if e else None,
+                       p_success_lower=round(e.lower, 4) if e else None,
+                       p_success_upper=round(e.upper, 4) if e else None,
+                       certified=e.certified if e else False)
+    return ManifoldTable(**dict(listed), table=rows)

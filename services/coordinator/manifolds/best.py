@@ -10,11 +10,13 @@ held, and the jitters that certify it.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 from enum import StrEnum
 
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
+from graspscape.services.coordinator.manifolds.p_success import estimates
 from graspscape.services.coordinator.manifolds.robust import (
     Neighbourhoods,
     RobustLabel,
@@ -107,9 +109,10 @@ def best_poses(
     limit: int = 1,
     rank: Rank | str = DEFAULT_RANK,
     coarser: int = 0,
+    pose_keys: Collection[str] | None = None,
 ) -> list[PoseRow]:
     """Viable poses, best first by `rank` (then μs desc, then key), optionally inside one
-    manifold, an approach cone, and below a joint effort.
+    manifold, an approach cone, below a joint effort, and among `pose_keys`.
 
     Higher is better except for the LOWER_IS_BETTER ranks; poses without the ranking value
     (NULL: the test was not run) come after every pose that has it. `Rank.ROBUST` ranks by the
@@ -140,7 +143,7 @@ def best_poses(
     return queries.best_pose_rows(
         session, exploration_id, ranking=_ranking(rank), manifold_id=manifold_id,
         cone_axis=cone_axis, cone_half_angle=cone_half_angle, max_effort_nm=max_effort_nm,
-        limit=limit)
+        limit=limit, pose_keys=pose_keys)
 
 
 def _ranking(rank: Rank) -> queries.Ranking:
@@ -159,15 +162,12 @@ def _best_p_success(session: Session, exploration_id: int, *, label: int | None,
                     max_effort_nm: float | None, limit: int, coarser: int) -> list[PoseRow]:
     """Poses with draws by the lower bound of P(success) (then k/n, μs, key), then the rest
     by the robust order, each passing the filters."""
-    # Imported here: p_success reads the certification's store module, which imports the
-    # manifold service, which this module's importers load first.
-    from graspscape.services.coordinator.manifolds.p_success import estimates
-
     est = estimates(session, exploration_id)
     filters = dict(label=label, cone_axis=cone_axis, cone_half_angle=cone_half_angle,
                    max_effort_nm=max_effort_nm)
-    drawn = [r for r in best_poses(session, exploration_id, limit=2**62, rank=Rank.MU_S,
-                                   **filters) if r.pose_key in est] if est else []
+    # Only the sampled poses are read for the first part: not every viable pose of the map.
+    drawn = best_poses(session, exploration_id, limit=len(est), rank=Rank.MU_S,
+                       pose_keys=est.keys(), **filters) if est else []
     drawn.sort(key=lambda r: (-est[r.pose_key].lower, -est[r.pose_key].p, -r.mu_s, r.pose_key))
     rest = best_poses(session, exploration_id, limit=limit + len(drawn), rank=Rank.ROBUST,
                       coarser=coarser, **filters)

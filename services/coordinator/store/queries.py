@@ -17,7 +17,7 @@ viable pose's id, θ and φ).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -81,8 +81,10 @@ def best_pose_ids(
     cone_half_angle: float | None = None,
     max_effort_nm: float | None = None,
     limit: int = 1,
+    pose_keys: Collection[str] | None = None,
 ) -> list[int]:
-    """Ids of the best viable poses, best first (see the module docstring for the order)."""
+    """Ids of the best viable poses, best first (see the module docstring for the order);
+    only those among `pose_keys` where given."""
     # `viable = true`, not a bare `viable`: SQLite uses an index column only in a comparison.
     where: list[ColumnElement[bool]] = [PoseRow.exploration_id == exploration_id,
                                         PoseRow.viable == true()]
@@ -90,6 +92,8 @@ def best_pose_ids(
         where.append(PoseRow.manifold_id == manifold_id)
     if max_effort_nm is not None:
         where.append(PoseRow.effort_max_nm <= max_effort_nm)
+    if pose_keys is not None:
+        where.append(PoseRow.pose_key.in_(sorted(pose_keys)))
     axis = None
     if cone_axis is not None:
         norm = math.sqrt(sum(c * c for c in cone_axis)) or 1.0

@@ -211,9 +211,18 @@ async function showBest(id, manifold, box) {
 // dust (the smaller ones) as one row that opens onto theirs.
 const MANIFOLD_COLUMNS = [
   ["Manifold", null], ["Grasp type", null], ["Poses", "num"], ["Volume, cm³", "num"],
-  ["Robust core, cm³", "num"], ["Mean μs", "num"], ["Best μs", "num"], ["", null]];
+  ["Robust core, cm³", "num"], ["Mean μs", "num"], ["Best μs", "num"],
+  ["P(success) of its best, 95 % bounds", null], ["", null]];
 
-function manifoldRow(id, m, box, dust) {
+// A manifold's best grasp by P(success): k of n draws, the bounds and the claim.
+function successText(s) {
+  if (!s || !s.success) return "–";
+  const e = s.success;
+  const bounds = `${e.k}/${e.n} [${fmt(e.lower, 2)}, ${fmt(e.upper, 2)}]`;
+  return e.certified ? `${bounds} certified` : bounds;
+}
+
+function manifoldRow(id, m, box, dust, success) {
   const pick = (ev) => {
     for (const tr of ev.target.closest("tbody").children) tr.classList.remove("selected");
     ev.target.closest("tr").classList.add("selected");
@@ -230,6 +239,9 @@ function manifoldRow(id, m, box, dust) {
       ? "–" : fmt(m.core_volume_cm3, 1)),
     el("td", { class: "num" }, fmt(m.mu_s_mean)),
     el("td", { class: "num" }, fmt(m.mu_s_max)),
+    el("td", { "data-testid": `success-${m.name}`, title: "draws of the exploration's " +
+      "uncertainty model held with the grasp type; certified: lower bound ≥ the level" },
+      dust ? "–" : successText(success)),
     el("td", {}, el("button", { type: "button", class: "secondary",
       "data-testid": `best-${m.name}`, "aria-label": `best grasp of ${m.name}`,
       onclick: pick }, "Best grasp")));
@@ -250,7 +262,7 @@ function dustRow(list, dustRows) {
     el("td", {}, `${fmt(d.manifolds)} smaller manifolds (each under 1 % of the viable volume)`),
     el("td", { class: "num" }, fmt(d.poses)),
     el("td", { class: "num" }, fmt(d.volume_cm3, 1)),
-    el("td", { colspan: 3 }),
+    el("td", { colspan: 4 }),
     el("td", {}, toggle));
 }
 
@@ -258,7 +270,8 @@ function manifoldTable(id, list, box) {
   const large = list.manifolds.filter((m) => m.large !== false);
   const dust = list.manifolds.filter((m) => m.large === false);
   const dustRows = dust.map((m) => manifoldRow(id, m, box, true));
-  const rows = large.map((m) => manifoldRow(id, m, box, false));
+  const chances = list.success || {};
+  const rows = large.map((m) => manifoldRow(id, m, box, false, chances[m.name]));
   if (dust.length && list.dust) rows.push(dustRow(list, dustRows), ...dustRows);
   return el("div", {},
     el("p", { class: "note" }, `${large.length} large manifold(s)` +

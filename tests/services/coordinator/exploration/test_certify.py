@@ -338,6 +338,13 @@ def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
     assert first["pose_key"] == best.key
     assert (first["success"]["k"], first["success"]["n"]) == (success.LOOKS[2],) * 2
     assert first["success"]["certified"] and first["success"]["lower"] == best.lower
+    # The manifold table carries the same grasp and numbers for its one large manifold.
+    table = client.get(f"/explorations/{eid}/manifolds").json()["success"]
+    assert list(table) == ["A"] and table["A"]["pose_key"] == best.key
+    assert table["A"]["success"] == first["success"]
+    row = client.get(f"/explorations/{eid}/export/manifolds.json").json()["table"][0]
+    assert (row["p_success_best"], row["p_success_k"], row["certified"]) == (
+        best.key, success.LOOKS[2], True)
     plan = _plan_of(sessions, eid)
     assert sum(1 for _, c in plan if c == best.key) == success.LOOKS[2]
     # Same spec, other worker count and report order: the same certification plan.

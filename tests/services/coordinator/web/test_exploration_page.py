@@ -102,6 +102,11 @@ def test_large_manifolds_and_one_dust_row(served, page) -> None:
     table = p.get_by_test_id("manifolds")
     heads = table.locator("thead th").all_inner_texts()
     assert "Volume, cm³" in heads and "Robust core, cm³" in heads
+    assert "P(success) of its best, 95 % bounds" in heads
+    # Each large manifold's cell says what /manifolds' `success` says: k/n and the bounds, or
+    # "–" where its best grasp was never drawn.
+    cell = table.get_by_test_id("success-A").inner_text()
+    assert cell == "–" or "/" in cell
     assert not any("_" in h for h in heads)  # no raw field names
     shown = table.locator("tbody tr:visible")
     names = [n for n in shown.locator("th").all_inner_texts()]
