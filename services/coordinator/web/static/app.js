@@ -212,7 +212,7 @@ async function showBest(id, manifold, box) {
 const MANIFOLD_COLUMNS = [
   ["Manifold", null], ["Grasp type", null], ["Poses", "num"], ["Volume, cm³", "num"],
   ["Robust core, cm³", "num"], ["Mean μs", "num"], ["Best μs", "num"],
-  ["P(success) of its best, 95 % bounds", null], ["", null]];
+  ["P(success)", null], ["", null]];
 
 // A manifold's best grasp by P(success): k of n draws, the bounds and the claim.
 function successText(s) {
@@ -239,8 +239,9 @@ function manifoldRow(id, m, box, dust, success) {
       ? "–" : fmt(m.core_volume_cm3, 1)),
     el("td", { class: "num" }, fmt(m.mu_s_mean)),
     el("td", { class: "num" }, fmt(m.mu_s_max)),
-    el("td", { "data-testid": `success-${m.name}`, title: "draws of the exploration's " +
-      "uncertainty model held with the grasp type; certified: lower bound ≥ the level" },
+    el("td", { "data-testid": `success-${m.name}`, title: "its best grasp by " +
+      "P(success): draws held with its grasp type k/n and the 95 % bounds; certified: the " +
+      "lower bound clears the exploration's level" },
       dust ? "–" : successText(success)),
     el("td", {}, el("button", { type: "button", class: "secondary",
       "data-testid": `best-${m.name}`, "aria-label": `best grasp of ${m.name}`,
