@@ -1,4 +1,4 @@
-"""The GPU path's first figure: MuJoCo Warp stepping many grasps at once (docs/simulation.md,
+"""The GPU path's first figure: MuJoCo Warp stepping many grasps at once (docs/design/simulation.md,
 "Batched evaluation on a GPU").
 
 Not an evaluation yet: the mug's model (the MuJoCo engine's, workers/sim/mj/world.py) with N

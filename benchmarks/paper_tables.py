@@ -1,4 +1,5 @@
-"""The paper's three tables, our numbers (issue 20): results/paper_tables*.json, docs/paper.md.
+"""The paper's three tables, our numbers (issue 20): results/paper_tables*.json,
+docs/design/paper.md.
 
 Table 1 (per object): the best held grasp by each of μs, μg, μf, μm and the torque margin
 ratio over the poses of the object's Table 3 runs, then its minimum closing effort by
@@ -30,7 +31,7 @@ says whether all ran). `--tables 3` runs Table 3 alone (Table 1 needs Table 3's 
 
     .venv/bin/python benchmarks/paper_tables.py                       # the default subset
     .venv/bin/python benchmarks/paper_tables.py --objects all --tables 3 \\
-        --name paper_tables_matched                                   # docs/paper.md's run
+        --name paper_tables_matched                                   # docs/design/paper.md's run
     .venv/bin/python benchmarks/paper_tables.py --size full --objects all --processes 16
 """
 

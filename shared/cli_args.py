@@ -1,6 +1,7 @@
 """The `graspscape` command's one vocabulary: each argument that several subcommands take is
 added here, once, so that it has the same flag, unit, help and validation everywhere
-(docs/cli.md, "Vocabulary"; tests/services/local/test_cli_vocabulary.py walks every parser).
+(docs/reference/cli-vocabulary.md, "Vocabulary"; tests/services/local/test_cli_vocabulary.py walks
+every parser).
 
 Angles are degrees on the command line and lengths metres unless the flag names its unit
 (`--r-mm`); a value out of range is refused by argparse as one line naming the flag, the
@@ -151,8 +152,8 @@ def add_exploration_id(parser: argparse.ArgumentParser) -> None:
 
 def add_hidden_alias(parser: argparse.ArgumentParser, flag: str, dest: str,
                      **kwargs: object) -> None:
-    """An earlier spelling of a flag, still accepted and not shown (docs/cli.md, "Earlier
-    spellings")."""
+    """An earlier spelling of a flag, still accepted and not shown
+    (docs/reference/cli-vocabulary.md, "Other spellings")."""
     parser.add_argument(flag, dest=dest, help=argparse.SUPPRESS, **kwargs)  # type: ignore[arg-type]
 
 

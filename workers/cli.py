@@ -101,7 +101,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--robustness", nargs="?", const="all", metavar="TESTS",
                     help="also run robustness margins and grasp tests on the synthesized grasp: "
                     "every one (a few seconds), or a comma-separated choice of torque_margin, "
-                    "friction_margin, gravity, force, tug, shake (docs/metrics.md)")
+                    "friction_margin, gravity, force, tug, shake (docs/concepts/quality.md)")
     ev.set_defaults(handler=_eval_pose)
     rp = subparsers.add_parser("render-pose", help="write a PNG of the grasp a pose synthesizes")
     _pose_args(rp)

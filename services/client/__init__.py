@@ -1,7 +1,7 @@
 """The Python client of the coordinator's REST API (httpx, pydantic; no server or worker code).
 
 `Client` submits, waits, reads progress, the best grasps, manifolds and poses as typed objects
-(4×4 numpy transforms), downloads exports and retries failed tiles; docs/client.md.
+(4×4 numpy transforms), downloads exports and retries failed tiles; docs/howto/client.md.
 Its names load on first use, so that the `graspscape` command's --help, which registers the
 client's subcommands, stays instant.
 """

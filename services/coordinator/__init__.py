@@ -1,1 +1,1 @@
-"""The coordinator: REST API, store and tile queue of explorations (docs/coordinator.md)."""
+"""The coordinator: REST API, store and tile queue of explorations (docs/design/store.md)."""

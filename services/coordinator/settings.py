@@ -61,7 +61,7 @@ class ZenohSettings(BaseModel):
         ge=0.0,
         description="after start, leases of workers not alive by then go back to the queue",
     )
-    # Access control (zenoh usrpwd, docs/protocol.md "Access control"). The password comes
+    # Access control (zenoh usrpwd, docs/design/protocol.md "Access control"). The password comes
     # from the environment (GRASPSCAPE_ZENOH__PASSWORD), never the config file.
     user: str = Field(
         default="graspscape", pattern=r"^[^:\s]{1,64}$",

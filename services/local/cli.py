@@ -66,7 +66,7 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
         "(torque_margin, friction_margin, gravity, force, tug, shake), or 'none'; "
         "default: the exploration spec's")
     explore.add_argument("--engine", choices=["pybullet", "mujoco"],
-                         help="physics engine (default pybullet; docs/simulation.md)")
+                         help="physics engine (default pybullet; docs/design/simulation.md)")
     explore.add_argument(
         "--uncertainty", choices=["none", "lab", "field"],
         help="the errors P(success) is stated and certified under: lab (default; 2 mm / 2° "
@@ -91,7 +91,7 @@ def _atlas(args: argparse.Namespace) -> int:
 def _register_atlas(subparsers: argparse._SubParsersAction) -> None:
     atlas = subparsers.add_parser(
         "atlas", help="explore every object in ../shared/objects and the built-ins with one "
-        "setting and write a static site (docs/viewer.md)",
+        "setting and write a static site (docs/howto/atlas.md)",
         epilog="Resumable: objects already explored with the setting are skipped. Exit status "
         "0 when every exploration is done, 2 when some ended otherwise.")
     atlas.add_argument("--setting", choices=["reduced", "full"],

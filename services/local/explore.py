@@ -149,7 +149,7 @@ def outcome_line(session: Session, exploration_id: int, stored: int, elapsed_s: 
 
 
 def robust_lines(robust: RobustSummary) -> str:
-    """The pick of each large manifold by P(success) (docs/exploration.md, "Certification"):
+    """The pick of each large manifold by P(success) (docs/design/exploration.md, "Certification"):
     volume and robust core, s_δ, the pose, k/n with the 95 % bounds, and the claim."""
     lines = ["best grasp by P(success) per large manifold (≥ 1 % of the viable volume):"]
     lines += [format_best(b) for b in robust.bests]

@@ -1,6 +1,6 @@
 """`graspscape gripper check PATH|NAME`: load a gripper (a TOML of boxes or a URDF gripper's
 folder), render it open and closed, close it on a sphere and a box, and print what it inferred
-and what looks wrong (workers/sim/gripper/check.py, docs/grippers.md)."""
+and what looks wrong (workers/sim/gripper/check.py, docs/howto/add-gripper.md)."""
 
 from __future__ import annotations
 

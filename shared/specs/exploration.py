@@ -101,7 +101,7 @@ class RefinementSpec(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     # Default 0 (coarse pass only): refinement is asked for explicitly, so that a submitted
-    # spec's cost is bounded by what it states (docs/exploration.md).
+    # spec's cost is bounded by what it states (docs/design/exploration.md).
     levels: int = Field(
         default=0,
         ge=0,
@@ -170,7 +170,8 @@ class CertificationSpec(BaseModel):
     border refinement and local search, each large manifold's candidates race for draws of
     the exploration's uncertainty model, sampled by an anytime-valid sequential rule, so that
     P(success) has a 95 % bound and "certified" means the lower bound clears `level`
-    (docs/exploration.md, "Certification"; docs/metrics.md, "P(success)"). `pose_error_mm`,
+    (docs/design/exploration.md, "Certification"; docs/concepts/success-probability.md).
+    `pose_error_mm`,
     `pose_error_deg` and `jitters` are read only by the pure plan without a race."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
@@ -198,7 +199,7 @@ class CertificationSpec(BaseModel):
     jitters: int = Field(
         default=8, ge=0, le=64,
         description="unused: draws of the uncertainty model are planned by the sequential "
-        "rule (docs/metrics.md, \"P(success)\"); kept so stored specs still read")
+        "rule (docs/concepts/success-probability.md); kept so stored specs still read")
     level: float = Field(
         default=0.9, gt=0.0, lt=1.0,
         description="certified: the 95 % lower bound of P(success) under the exploration's "
@@ -207,7 +208,7 @@ class CertificationSpec(BaseModel):
 
 class AdaptiveStrategySpec(BaseModel):
     """The paper's exploration: the coarse grid, border refinement down to
-    `refinement.levels`, the shortcuts, local search rounds (docs/exploration.md)."""
+    `refinement.levels`, the shortcuts, local search rounds (docs/design/exploration.md)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
@@ -300,8 +301,8 @@ StrategySpec = Annotated[
 
 
 # An exploration measures the torque margin of every held pose unless told otherwise: it is
-# what /best ranks by (docs/metrics.md, "What /best ranks by"), at about one more evaluation's
-# worth of simulation per held pose.
+# what /best ranks by (docs/concepts/quality.md, "What /best ranks by"), at about one more
+# evaluation's worth of simulation per held pose.
 EXPLORATION_ROBUSTNESS = RobustnessSettings(tests=("torque_margin",))
 
 

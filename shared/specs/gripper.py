@@ -1,6 +1,6 @@
 """The gripper spec formats: a palm and fingers made of phalanges (a TOML of boxes, generic
 enough for any serial-finger gripper: the Robotiq 3-finger hand, a parallel-jaw gripper, ...),
-or a vendor's URDF plus a short description of it (`UrdfGripperSpec`, docs/grippers.md).
+or a vendor's URDF plus a short description of it (`UrdfGripperSpec`, docs/howto/add-gripper.md).
 
 Frames: the gripper base frame has its origin at the centre of the palm surface and +z along
 the palm normal, pointing out of the palm toward where the fingers reach. Each finger has a
@@ -266,7 +266,8 @@ def unknown_gripper_message(name_or_path: str) -> str:
         has = (folder / URDF_DESCRIPTION).is_file()
         return (f"{name_or_path} is a robot description, not a gripper: pass its folder "
                 f"({folder}){' which has' if has else ', with'} a {URDF_DESCRIPTION} that "
-                "says which links are the palm and fingers (docs/grippers.md, 'A URDF gripper')")
+                "says which links are the palm and fingers (docs/howto/add-gripper.md, 'A URDF "
+                "gripper')")
     if path.suffix or len(path.parts) != 1:
         return (f"no gripper at {name_or_path}: a TOML spec file, or a folder with "
                 f"{URDF_DESCRIPTION}, is expected")

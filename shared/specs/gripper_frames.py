@@ -1,5 +1,5 @@
-"""Re-expressing the exports' gripper frame in the frames other tools use (docs/datasets.md,
-"Other gripper frames"). Pure functions of a gripper's description.
+"""Re-expressing the exports' gripper frame in the frames other tools use
+(docs/reference/formats.md, "Other gripper frames"). Pure functions of a gripper's description.
 
 The exports' gripper frame is the palm surface centre, z the palm normal toward the object and
 x the palm's x axis as the description gives it (the closing axis of every shipped parallel

@@ -1,7 +1,7 @@
 """Settings of the shape-informed haptic policy G_s (paper Sec. III-D, Alg. 1).
 
 Lengths in metres, angles in radians. Every limit of the two iterations lives here so that a
-result depends only on the pose and the SimSettings it was computed with. docs/metrics.md
+result depends only on the pose and the SimSettings it was computed with. docs/concepts/quality.md
 explains the defaults.
 """
 

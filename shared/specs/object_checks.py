@@ -3,7 +3,7 @@
 Run at upload by the coordinator, by the CLI before it simulates and by the worker's
 preparation, so an object is refused (or warned about) in the same words everywhere, at the
 door rather than on every worker. Pure: trimesh and numpy only, no pybullet. Every message
-says what is wrong and what to do. The limits and why: docs/objects.md, "Validation".
+says what is wrong and what to do. The limits and why: docs/howto/add-object.md, "Validation".
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ class ObjectReport(BaseModel):
 @functools.cache
 def gripper_reach_m() -> float:
     """The longest reach of the shipped grippers of boxes (TOML specs): the object must suit at
-    least one of them. Grippers from URDFs (docs/grippers.md) leave the limits where they
+    least one of them. Grippers from URDFs (docs/howto/add-gripper.md) leave the limits where they
     were: pybullet's WSG-50 with its 15 cm finger boxes would loosen them by half."""
     specs = [load_gripper(name) for name in list_grippers()]
     return max(spec.reach() for spec in specs if isinstance(spec, GripperSpec))
@@ -268,7 +268,7 @@ def _carries_mass(spec: ObjectSpec) -> bool:
 
 def check_name(spec: ObjectSpec) -> ObjectReport:
     """A named object: does the name exist here, and does its size at `scale` suit the
-    gripper? Its geometry is vouched for (docs/objects.md); a worker checks it again."""
+    gripper? Its geometry is vouched for (docs/howto/add-object.md); a worker checks it again."""
     name = spec.name or ""
     report = ObjectReport()
     if name in NAMED_SIZE_M:  # the built-ins and pybullet_data entries

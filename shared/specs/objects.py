@@ -42,7 +42,7 @@ class ObjectSpec(BaseModel):
         default=None,
         description=(
             "moments of inertia about the centre of mass along the object-frame axes, kg·m²; "
-            "default: from the mesh at mass_kg (see docs/objects.md)"
+            "default: from the mesh at mass_kg (see docs/howto/add-object.md)"
         ),
     )
     scale: float = Field(default=1.0, gt=0.0, le=100.0, description="uniform mesh scale")

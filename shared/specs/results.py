@@ -45,7 +45,8 @@ class GraspConfiguration(BaseModel):
     """The paper's (η_r(t_c), θ_g(t_c)): base pose in the object frame and joint angles.
 
     The base pose is the gripper frame's (palm surface centre, z the palm normal) at the end of
-    closing, relative to the object's centre-of-mass frame at that instant (docs/datasets.md)."""
+    closing, relative to the object's centre-of-mass frame at that instant
+    (docs/reference/formats.md)."""
 
     model_config = _FINITE
 
@@ -70,8 +71,8 @@ class PhaseTimes(BaseModel):
 
 class RobustnessReport(BaseModel):
     """Robustness margins and grasp tests of one synthesized grasp (workers/sim/robustness.py,
-    docs/metrics.md). A field is None where its test did not run (not chosen, or the pose was
-    not held); a margin is also None where the grasp drops even at the nominal value."""
+    docs/concepts/quality.md). A field is None where its test did not run (not chosen, or the pose
+    was not held); a margin is also None where the grasp drops even at the nominal value."""
 
     model_config = _FINITE
 

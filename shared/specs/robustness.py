@@ -1,5 +1,5 @@
 """Settings of the robustness margins and grasp tests run on a synthesized grasp
-(workers/sim/robustness.py; docs/metrics.md, "Robustness margins and grasp tests").
+(workers/sim/robustness.py; docs/concepts/quality.md, "Robustness margins and grasp tests").
 
 All tests are off by default (`tests=()`): they cost several trajectories' worth of simulation
 per pose, so they run only when asked for (`RobustnessSettings.every_test()`, or

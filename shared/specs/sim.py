@@ -41,7 +41,7 @@ class PlacementSettings(BaseModel):
     along the surface normal in `backoff_step_m` steps (so many r levels start at one place).
     `"clearance"`: r is the clearance between the whole open hand and the object; the palm gap
     that gives it is found along the same normal by the same steps, then by bisection to
-    `clearance_tolerance_m` (docs/simulation.md, "Start gap")."""
+    `clearance_tolerance_m` (docs/design/simulation.md, "Start gap")."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
@@ -82,7 +82,7 @@ class BaselinePolicySettings(BaseModel):
 class TrajectorySpec(BaseModel):
     """The reference task: lift, move sideways and turn, with minimum-jerk timing.
 
-    The default loads the grasp (docs/metrics.md, "The reference task"): 15 cm up and 15 cm
+    The default loads the grasp (docs/concepts/quality.md, "The reference task"): 15 cm up and 15 cm
     sideways in 0.4 s peak at 5.4 m/s² per axis (0.78 g together, against the 0.08 g of the
     first wave's 1 s task), the order of the community's 1 g gravity and m·g force tests. The
     turn stays gentle (0.3 rad, 1.4 rad/s at most): pybullet's first-order integration of a
@@ -106,7 +106,7 @@ class TrajectorySpec(BaseModel):
 
 
 class MetricSettings(BaseModel):
-    """How μs is measured: see docs/metrics.md for why each value."""
+    """How μs is measured: see docs/concepts/quality.md for why each value."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
@@ -130,7 +130,7 @@ class SimSettings(BaseModel):
     engine: EngineName = Field(
         default="pybullet",
         description="physics engine: pybullet, or mujoco (its step is rate_hz × "
-        "mujoco_substeps; docs/simulation.md, \"MuJoCo\")")
+        "mujoco_substeps; docs/design/simulation.md, \"MuJoCo\")")
 
     policy_name: str = Field(default="baseline", pattern=r"^[a-z][a-z0-9_]*$",
                              description="grasp synthesis policy (workers/sim/policies)")

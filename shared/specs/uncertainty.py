@@ -1,7 +1,7 @@
 """The uncertainty a grasp's success probability is stated under, and its seeded draws.
 
 A grasp's quality, as a robot needs it, is the probability that it succeeds under the errors
-the robot will make (docs/metrics.md, "P(success)"). `UncertaintyModel` states those errors:
+the robot will make (docs/concepts/success-probability.md). `UncertaintyModel` states those errors:
 
 - the start pose's position error (per axis Gaussian with σ = `position_mm`, or uniform in a
   ball of radius `position_mm`) and attitude error (the same forms, `orientation_deg`);

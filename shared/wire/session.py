@@ -10,7 +10,7 @@ coordinator's embedded peer, or a router) holds a dictionary file of `user:passw
 refuses a transport whose credentials are not in it; the side that connects presents `user`
 and `password`. Both sides must agree: with zenoh 1.10 a session that presents credentials
 to a listener without a dictionary is refused as well, and a listener that has credentials
-but no dictionary refuses everyone (docs/protocol.md, "Access control").
+but no dictionary refuses everyone (docs/design/protocol.md, "Access control").
 """
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ class WorkerConfig(BaseModel):
     shutdown_grace_s: float = Field(default=30.0, ge=0)
     # A process that crashed (not one that was told to stop) is started again.
     restart_crashed: bool = True
-    # zenoh usrpwd login, where the coordinator or router asks for one (docs/protocol.md,
+    # zenoh usrpwd login, where the coordinator or router asks for one (docs/design/protocol.md,
     # "Access control"); no password: no login.
     zenoh_user: str = Field(default="graspscape", pattern=r"^[^:\s]{1,64}$")
     zenoh_password: SecretStr | None = None

@@ -1,4 +1,4 @@
-"""The simulation: one pose in, one scored grasp out (see docs/simulation.md).
+"""The simulation: one pose in, one scored grasp out (see docs/design/simulation.md).
 
 pybullet prints its build time on stderr when first imported, from C; in worker processes
 that line lands in the middle of progress bars and logs, so the first import happens here

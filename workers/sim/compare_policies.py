@@ -5,7 +5,7 @@ v_c and v_s, the volume (cm³) of the viable set, i.e. of the gripper reference-
 centre) positions whose pose is held along the trajectory; the best μs, μg, μf, μm of each
 policy over its viable poses; and containment, the share of G_c-viable poses that G_s also
 holds. v is the volume of the whole viable set, not per behavioral manifold (the grouping of
-viable poses by grasp type is the coordinator's explorations': docs/exploration.md).
+viable poses by grasp type is the coordinator's explorations': docs/design/exploration.md).
 
 Volume: a pose (θ, φ, r) stands for the cell θ ± Δθ/2, φ ± Δφ/2, r ± Δr/2. Its reference point
 lies on the ray (θ, φ) from the object's centre of mass at distance ρ(r) (placement.py), so

@@ -2,7 +2,7 @@
 
 Pure functions on `Contact`s (object frame: positions relative to the object's centre of mass,
 unit inward normals, friction coefficient, normal force) plus the glue `scene_metrics` that
-reads the contacts of a synthesized grasp from the scene (either engine). docs/metrics.md
+reads the contacts of a synthesized grasp from the scene (either engine). docs/concepts/quality.md
 derives each formula.
 
 Units. A wrench is [f; τ/L]: torques are divided by a characteristic length L (the evaluator's,

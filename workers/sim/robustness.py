@@ -6,7 +6,7 @@ restores it with `restore_grasp`: bodies through a contact-free state (no contac
 cache carries over, so a trial does not depend on what ran before it), the motor commands the
 policy left (pybullet's saved states hold none), the drive and fixture constraints, zero
 gravity and the object's friction. Only the fixture is then released; the hand keeps its joint
-configuration and its motors, nothing is synthesized again. docs/metrics.md, "Robustness
+configuration and its motors, nothing is synthesized again. docs/concepts/quality.md, "Robustness
 margins and grasp tests", has the same list; `RobustnessSettings` (shared/specs/robustness.py)
 holds every parameter.
 

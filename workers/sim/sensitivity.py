@@ -17,8 +17,8 @@ A displacement δ after a window from the same state is ½·ā·T² for the wind
 weighted) mean acceleration ā, so the ratio of the two responses is the ratio of mean
 accelerations: S = Δ_rel Δ_base⁻¹ (metric.deviation_matrix).
 
-Why relative poses and not absolute velocities (docs/metrics.md, "The estimator"): G − I taken
-as the difference of two absolute responses reads the gripper's velocity at the anchor with
+Why relative poses and not absolute velocities (docs/concepts/quality.md, "The estimator"): G − I
+taken as the difference of two absolute responses reads the gripper's velocity at the anchor with
 one orientation while the solver enforced contacts with another, a centripetal term of second
 order in ε that a one-sided difference keeps; an object welded to the palm scored 0.85–0.94
 (0.51 for a 3 cm ball, the error growing as 1/L²). The relative pose of a welded object does

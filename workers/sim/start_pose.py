@@ -4,7 +4,7 @@ surface normal until it no longer interpenetrates the object (the simulator side
 
 Modes (`PlacementSettings.start_gap`): "palm" backs the hand off in `backoff_step_m` steps
 from the nominal palm gap; "clearance" makes r the open hand's free travel along its approach
-axis (docs/simulation.md "Start gap").
+axis (docs/design/simulation.md "Start gap").
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
     415: error("unsupported mesh file format"),
     422: {
         "description": "invalid properties, unknown name, or a mesh the validation refuses "
-        "(docs/objects.md, 'Validation'); the detail names each problem and what to do"
+        "(docs/howto/add-object.md, 'Validation'); the detail names each problem and what to do"
     },
 }
 

@@ -10,7 +10,7 @@ it.
 
 zenoh tells the application neither the session nor the login a query came from (its
 `source_info` is whatever the sender writes), so the key is what tells sessions apart; logins
-(docs/protocol.md, "Access control") still decide who may open a session at all.
+(docs/design/protocol.md, "Access control") still decide who may open a session at all.
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ large manifolds in each round (`plan`); and
    budget at least (certify_store.certification_round splits it).
 
 Each certification round is planned at a quiescent point from every stored result, so the plan
-is a function of the stored results and the spec (docs/exploration.md, "Determinism"); a round
-whose robust best changed (its neighbours dropped) certifies the new one in the next round,
+is a function of the stored results and the spec (docs/design/exploration.md, "Determinism"); a
+round whose robust best changed (its neighbours dropped) certifies the new one in the next round,
 until nothing is left to do or the budget is spent.
 
 A robust claim (`Evidence.certified`) needs the centre held, every member of N_δ known

@@ -3,7 +3,7 @@
 Every decision is a function of the results of two lattice neighbours (or of the two ends of
 a normal segment) and of nothing else: not of arrival order, not of which worker sent what.
 The set of poses an exploration evaluates is therefore the least set closed under these rules,
-the same for one worker or eight (see docs/exploration.md, "Determinism").
+the same for one worker or eight (see docs/design/exploration.md, "Determinism").
 
 - Border refinement: for neighbours p, q at level L that differ (viability, grasp type, or a
   μs step above the slope criterion), the level-L+1 point between them is evaluated. The new

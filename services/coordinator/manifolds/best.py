@@ -80,8 +80,8 @@ class Rank(StrEnum):
 # The ranking of /best and best_poses when none is asked for: the torque margin, which every
 # exploration measures on its held poses by default. μs does not predict the margins (Spearman
 # 0.09 with this one, 0.09 with the friction margin over 210 held grasps of 6 objects,
-# benchmarks/results/metric_validity.json, docs/metrics.md "What /best ranks by"); it is kept,
-# shown beside, and breaks ties — and ranks alone where the margin was not measured.
+# benchmarks/results/metric_validity.json, docs/concepts/quality.md "What /best ranks by"); it is
+# kept, shown beside, and breaks ties — and ranks alone where the margin was not measured.
 DEFAULT_RANK = Rank.TORQUE_MARGIN_RATIO
 # What /best ranks by when none is asked for: the grasp most likely to succeed under the
 # stated errors, by the lower bound of P(success). rank=point gives DEFAULT_RANK.

@@ -7,7 +7,7 @@
 
 `show` and `export` read the coordinator's database (--database-url, default: the
 coordinator's settings); the grasp datasets (graspgen.json, acronym.h5 and the object mesh
-they name) are services/coordinator/datasets' (docs/datasets.md). `run`
+they name) are services/coordinator/datasets' (docs/reference/formats.md). `run`
 (graspscape.services.local.map_run, which needs the workers) explores an object in this
 process (pybullet, SQLite) with the same store code as the coordinator and writes the map and
 the manifold table.

@@ -2,7 +2,7 @@
 
 Only poses on the exploration's lattice are read (a pose whose key is its lattice point's
 key); poses off the lattice, such as those of the random strategy, are stored and listed but
-take no part in lattice decisions or manifolds (docs/exploration.md, "Strategies").
+take no part in lattice decisions or manifolds (docs/design/exploration.md, "Strategies").
 """
 
 from __future__ import annotations

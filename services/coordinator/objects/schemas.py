@@ -23,7 +23,7 @@ class ObjectOut(BaseModel):
     mesh_info: MeshInfo | None
     warnings: list[str] = Field(
         default_factory=list,
-        description="what the validation at upload warned about (docs/objects.md, "
+        description="what the validation at upload warned about (docs/howto/add-object.md, "
         "'Validation'): the object is accepted, but check these",
     )
     created_at: datetime

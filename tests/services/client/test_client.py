@@ -144,7 +144,7 @@ def test_the_docs_example_runs(live_url, sessions, tmp_path, monkeypatch, capsys
     worker = threading.Thread(target=work)
     worker.start()
     try:
-        exec(compile(code, "docs/client.md", "exec"), {})
+        exec(compile(code, "docs/howto/client.md", "exec"), {})
     finally:
         stop.set()
         worker.join()

@@ -104,8 +104,8 @@ def test_unreachable_alignment_makes_the_pose_non_viable(make_evaluator):
 
 
 # Poses facing the built-in mug's handle (+x), a little below it and turned by ±45°. Around the
-# handle neither policy dominates (docs/metrics.md): these are poses of that neighbourhood from
-# which G_c closes on the body and loses the mug, or finds nothing, while G_s may take the
+# handle neither policy dominates (docs/concepts/quality.md): these are poses of that neighbourhood
+# from which G_c closes on the body and loses the mug, or finds nothing, while G_s may take the
 # handle. The test asks for at least one.
 HANDLE_POSES = [
     Pose(theta=1.85, phi=-0.3, r=0.01, roll=math.pi / 4),

@@ -57,7 +57,7 @@ WELD_POSES = CALIBRATION_POSES
 # A weld reads S = 0 by construction of the estimator (relative poses, ±ε); what is left is
 # pybullet's: a weld is a velocity-level constraint that lags the hand's turn along the moving
 # reference path by a fraction of a millimetre (0.9965–0.9999 on a task that stands still,
-# docs/metrics.md, "The estimator"). The 3 cm ball, with the shortest lever, reads lowest.
+# docs/concepts/quality.md, "The estimator"). The 3 cm ball, with the shortest lever, reads lowest.
 WELD_FLOOR = 0.97
 
 
@@ -155,7 +155,7 @@ def test_rotation_vector_inverts_axis_rotations():
 def test_moving_the_object_keeps_outcomes_and_most_mu_s(name, make_evaluator):
     # The estimator reads relative poses only; the simulation is not repeatable under
     # round-off to below a millimetre, so a few compliant grasps' μs move as they do when the
-    # object moves 1 µm (docs/metrics.md: 88–90 % of 72 grasps of six objects stay within
+    # object moves 1 µm (docs/concepts/quality.md: 88–90 % of 72 grasps of six objects stay within
     # 0.01; the mug's fewest). Every outcome stays; at least half the grasps keep μs.
     rng = np.random.default_rng(7)
     poses = [Pose(theta=float(np.arccos(rng.uniform(-1, 1))), phi=float(rng.uniform(0, 6.28)),

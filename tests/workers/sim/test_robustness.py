@@ -282,8 +282,8 @@ def test_tests_chosen_in_the_settings_run_on_every_held_evaluation(make_evaluato
 @pytest.mark.slow
 def test_a_fingertip_clamp_ranks_below_a_body_wrap_of_the_same_mug(mug_evaluator):
     # The pair under the default task: a two-fingertip clamp of the rim (A_3 and B_3
-    # only) and the wrap of the body in docs/simulation.md's picture. Both hold, and μs cannot
-    # tell them apart (≈ 0.97 each); the margins can: the clamp needs most of its closing
+    # only) and the wrap of the body in docs/design/simulation.md's picture. Both hold, and μs
+    # cannot tell them apart (≈ 0.97 each); the margins can: the clamp needs most of its closing
     # effort and all of its friction, the wrap little of either.
     margins = RobustnessSettings(tests=("torque_margin", "friction_margin"))
     clamp, clamp_report = mug_evaluator.robustness(

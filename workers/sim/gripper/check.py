@@ -1,5 +1,5 @@
 """`graspscape gripper check`: loads a gripper, looks at it and tries it, and says what it
-inferred and what looks wrong (docs/grippers.md).
+inferred and what looks wrong (docs/howto/add-gripper.md).
 
 In free air (a client of its own, the hand fixed at the origin, no gravity): the open and the
 closed hand are rendered from two sides; the reach (how far the open hand's links stand past

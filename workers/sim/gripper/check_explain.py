@@ -63,5 +63,5 @@ def zero_quality_warnings(trials: Sequence[_Trial]) -> list[str]:
     return [f"{t.object}, {t.start}: held with μs {t.mu_s:.2f} — the contacts "
             f"({', '.join(t.links_in_contact) or 'none recorded'}) resist no disturbance in "
             "the metric's sense; the hold may rest on friction alone or on the palm's "
-            "origin and axes being off (docs/grippers.md)"
+            "origin and axes being off (docs/howto/add-gripper.md)"
             for t in trials if t.viable and t.mu_s <= MU_S_ZERO]

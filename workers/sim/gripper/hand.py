@@ -7,7 +7,7 @@ finger's closing effort once blocked, and never overshoots a limit, which pure t
 does on such light links); when a closing phalanx halts (blocked by the object, or at its
 limit), the next one starts closing too, and the blocked ones keep pushing with their full
 share of the effort (`settle`). A finger whose phalanges have all halted is done. See
-docs/simulation.md.
+docs/design/simulation.md.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from graspscape.workers.sim.gripper.model import (
 # with exactly its share of τ_c. With the closing speed as target, the row gains only about
 # speed × the link's effective inertia per iteration: a 0.05 kg distal link needs ≈100
 # iterations to reach its cap, so at 50 the finger pushed with a fraction of τ_c that depended
-# on the iteration count (docs/simulation.md, "Blocked phalanges push").
+# on the iteration count (docs/design/simulation.md, "Blocked phalanges push").
 PUSH_VELOCITY = 1000.0
 LIMIT_MARGIN = 1e-3  # rad (or m): a phalanx this close to its upper limit is at it
 

@@ -1,6 +1,6 @@
 """A vendor's URDF made into a gripper the Hand can drive (pure: files in, a URDF file out).
 
-What the rewrite does, in order (docs/grippers.md):
+What the rewrite does, in order (docs/howto/add-gripper.md):
 - keeps the subtree under the description's base link (a hand on an arm: the arm is dropped);
 - refuses any joint that moves and that the description does not name (it would swing free);
 - re-roots the base link at the palm frame, so pybullet's base frame is the gripper frame the

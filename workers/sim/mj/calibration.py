@@ -1,6 +1,6 @@
 """The estimator's anchor in MuJoCo: μs of an object welded to the palm (calibration.py's
 `weld_reading` for pybullet). A weld moves the object exactly with the hand, so a sound probe
-reads S = 0 and μs = 1 (docs/metrics.md, "The estimator")."""
+reads S = 0 and μs = 1 (docs/concepts/quality.md, "The estimator")."""
 
 from __future__ import annotations
 

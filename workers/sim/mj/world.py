@@ -2,7 +2,7 @@
 TOML spec's generated one or a vendor's rewritten one) with a free joint on its palm, and the
 object as one body of the same convex parts pybullet collides with.
 
-What differs from pybullet, and how the model makes the two comparable (docs/simulation.md,
+What differs from pybullet, and how the model makes the two comparable (docs/design/simulation.md,
 "MuJoCo"):
 - Friction: MuJoCo combines two geoms' frictions by their maximum, pybullet multiplies them.
   Every hand and object geom gets the product pybullet uses (object × the hand link's 0.5), so

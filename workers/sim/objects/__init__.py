@@ -1,7 +1,7 @@
 """Objects to grasp: names and mesh files -> COM-frame geometry and pybullet bodies.
 
 prepare_object is pure (no physics client) and caches convex decompositions on disk;
-spawn_object turns its result into a body in a given client. See docs/objects.md.
+spawn_object turns its result into a body in a given client. See docs/howto/add-object.md.
 """
 
 from .catalog import describe, list_builtin_objects

@@ -52,7 +52,8 @@ class PbEntry:
 
 
 # Scales bring each mesh to hand size (~10 cm); pybullet_data's own URDF masses and
-# frictions are demo placeholders, so masses are plausible guesses, documented in docs/objects.md.
+# frictions are demo placeholders, so masses are plausible guesses, documented in
+# docs/howto/add-object.md.
 PB_ENTRIES: dict[str, PbEntry] = {
     "mug": PbEntry(
         "objects/mug.obj", None, 1.0, 0.3,

@@ -61,7 +61,7 @@ class PreparedObject:
     decomposition: Decomposition
     decomposition_cached: bool  # True when the hulls came from the on-disk cache
     prepare_seconds: float = field(default=0.0)
-    warnings: tuple[str, ...] = ()  # what the validation warned about (docs/objects.md)
+    warnings: tuple[str, ...] = ()  # what the validation warned about (docs/howto/add-object.md)
 
 
 def prepare_object(

@@ -162,7 +162,7 @@ class AdaptiveStrategy:
             # Search in the large manifolds only (≥ 1 % of the viable volume, the map's
             # `large`): on a map with structure at every scale most manifolds are dust of one
             # or a few poses, each with its own maxima, and searching them all cost the cube
-            # 40-68 % of its dense grid (docs/exploration.md, "Local search").
+            # 40-68 % of its dense grid (docs/design/exploration.md, "Local search").
             computed = refresh_manifolds(session, batch.exploration_id, spec, self.lattice,
                                          samples=samples)
             self._refreshed = True

@@ -7,7 +7,8 @@ and attitude: every pose is still uniform over the space, the poses of one block
 independent. The whole sample is a function of the spec alone (seed, budget, grid), drawn
 with its own generator, so it is repeatable whatever the workers do; round k
 hands out the k-th of `rounds` equal slices once the slices before are stored. The poses are
-off the lattice: they are stored and listed, not grouped into manifolds (docs/exploration.md).
+off the lattice: they are stored and listed, not grouped into manifolds
+(docs/design/exploration.md).
 """
 
 from __future__ import annotations

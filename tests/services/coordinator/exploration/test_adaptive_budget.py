@@ -1,6 +1,6 @@
 """`refinement.max_poses` caps the adaptive strategy's local search as well as its border
 refinement (strategies/adaptive.py): on the cube an uncapped search over every manifold spent
-40-70 % of the dense grid (docs/exploration.md, "Robust map benchmark")."""
+40-70 % of the dense grid (docs/design/exploration.md, "Robust map benchmark")."""
 
 from __future__ import annotations
 

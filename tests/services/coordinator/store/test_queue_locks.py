@@ -5,7 +5,7 @@ exploration (ingest holds a key-share lock on that row from its insert on). `FOR
 UPDATE` would not wait on the key-share lock, but then a requeue that touches the tile an open
 ingest has already moved waits on that tile's row while the ingest waits on the requeue's row
 lock for its counter update: PostgreSQL's deadlock detector aborts one of them
-(docs/coordinator.md, "Ingest"). The test plays that race with the real requeue.
+(docs/design/store.md, "Ingest"). The test plays that race with the real requeue.
 """
 
 from __future__ import annotations
