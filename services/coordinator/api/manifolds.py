@@ -16,6 +16,10 @@ from fastapi.responses import StreamingResponse
 from graspscape.services.coordinator.api import answers
 from graspscape.services.coordinator.api.deps import SessionDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
+from graspscape.services.coordinator.api.manifold_success import (
+    ManifoldSuccess,
+    manifold_successes,
+)
 from graspscape.services.coordinator.api.responses import encoded, error
 from graspscape.services.coordinator.api.streams import ClosingStream
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
@@ -23,7 +27,6 @@ from graspscape.services.coordinator.exploration.schemas import PoseOut
 from graspscape.services.coordinator.manifolds import best as ranking
 from graspscape.services.coordinator.manifolds import export, p_success
 from graspscape.services.coordinator.manifolds import service as manifolds
-from graspscape.services.coordinator.manifolds.grouping import label_name as manifold_name
 from graspscape.services.coordinator.manifolds.p_success import SuccessOut
 from graspscape.services.coordinator.manifolds.robust import coarser_for_error, error_in_steps
 from graspscape.services.coordinator.manifolds.summary import (
@@ -51,14 +54,6 @@ class DustLine(BaseModel):
     manifolds: int
     poses: int
     volume_cm3: float
-
-
-class ManifoldSuccess(BaseModel):
-    """A large manifold's best grasp by P(success): what /best?manifold=L answers first."""
-
-    pose_key: str
-    success: SuccessOut | None = Field(description="its P(success) under the exploration's "
-                                       "uncertainty model; null where nothing was drawn")
 
 
 class ManifoldList(BaseModel):
@@ -151,20 +146,6 @@ def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
     return _json(answers.answer(key, lambda: _manifolds_body(session, exploration_id)))
 
 
-def _manifold_successes(session: Any, exploration_id: int,
-                        labels: list[int]) -> dict[str, ManifoldSuccess]:
-    """The first answer of /best?manifold=L (rank p_success) of each label, with P(success)."""
-    firsts = {}
-    for number in labels:
-        rows = ranking.best_poses(session, exploration_id, label=number, limit=1,
-                                  rank=ranking.Rank.P_SUCCESS)
-        if rows:
-            firsts[manifold_name(number)] = rows[0].pose_key
-    chances = p_success.estimates(session, exploration_id, firsts.values()) if firsts else {}
-    return {name: ManifoldSuccess(pose_key=key, success=chances.get(key))
-            for name, key in firsts.items()}
-
-
 def _manifolds_body(session: Any, exploration_id: int) -> bytes:
     # The summaries' stored JSON text copied into the answer, the dust line from columns:
     # nothing decoded, validated or encoded again (issue 21; migration 0012).
@@ -174,7 +155,7 @@ def _manifolds_body(session: Any, exploration_id: int) -> bytes:
                      volume_cm3=round(sum(m.volume_cm3 for m in small), 3)).model_dump()
             if small else None)
     head = json.dumps({"exploration_id": exploration_id, "final": final})[:-1]
-    success = _manifold_successes(session, exploration_id, [m.label for m in items if m.large])
+    success = manifold_successes(session, exploration_id, [m.label for m in items if m.large])
     tail = json.dumps({k: v.model_dump(mode="json") for k, v in success.items()})
     return (f'{head}, "manifolds": [{", ".join(m.summary for m in items)}], '
             f'"dust": {json.dumps(dust)}, "success": {tail}}}'.encode())
@@ -183,7 +164,7 @@ def _manifolds_body(session: Any, exploration_id: int) -> bytes:
 def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
     """The list as models (the JSON export adds its short rows to it)."""
     items = manifolds.stored_manifolds(session, exploration_id)
-    success = _manifold_successes(session, exploration_id,
+    success = manifold_successes(session, exploration_id,
                                   [m.label for m in items if m.large])
     return ManifoldList(exploration_id=exploration_id,
                         final=manifolds.is_final(session, exploration_id),
