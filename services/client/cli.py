@@ -126,7 +126,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     best.add_argument("--manifold", help="only in this manifold (label A, B, ...)")
     best.add_argument("--limit", type=cli_args.bounded("(poses)", 1, 100, integer=True),
                       default=1, help="how many (default 1)")
-    best.add_argument("--rank", help="what ranks them (default robust; GET /best's rank)")
+    best.add_argument("--rank", help="what ranks them (GET /best's rank; default p_success)")
     best.add_argument("--json", action="store_true", help="print the answer as JSON")
     cli_args.add_remote(best)
     best.set_defaults(handler=_best)

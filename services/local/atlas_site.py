@@ -165,8 +165,9 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
     numeric = {2, 3, *range(4, 4 + len(extra) + 4)}
     grasps = []
     for m in listed[:MAX_GRASP_PICTURES]:
-        # Ranked as GET /best ranks by default.
-        best = ranking.best_poses(session, eid, label=m.label, limit=1)
+        # Ranked as GET /best ranks by default (P(success), then the robust order).
+        best = ranking.best_poses(session, eid, label=m.label, limit=1,
+                                  rank=ranking.BEST_DEFAULT_RANK)
         if not best:
             continue
         pose = best[0]
