@@ -130,7 +130,7 @@ def unused_port() -> int:
 def test_the_docs_example_runs(live_url, sessions, tmp_path, monkeypatch, capsys) -> None:
     from pathlib import Path
 
-    text = (Path(__file__).resolve().parents[3] / "docs" / "client.md").read_text()
+    text = (Path(__file__).resolve().parents[3] / "docs" / "howto" / "client.md").read_text()
     code = text.split("```python\n", 1)[1].split("```", 1)[0]
     monkeypatch.setenv("GRASPSCAPE_URL", live_url)
     monkeypatch.chdir(tmp_path)
