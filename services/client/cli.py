@@ -42,6 +42,8 @@ def _submit(args: argparse.Namespace) -> int:
                   "label": args.label or f"graspscape submit {args.object}"}
     if args.gripper is not None:
         spec["gripper"] = args.gripper
+    if args.uncertainty is not None:
+        spec["uncertainty"] = {"preset": args.uncertainty}
     props = {"mass_kg": args.mass, "friction": args.friction, "scale": args.scale,
              "units": args.units}
     with _client(args) as api:
@@ -107,6 +109,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     cli_args.add_gripper(submit)
     cli_args.add_grid(submit, dtheta=DEFAULT_DTHETA_DEG, r=DEFAULT_R, levels=DEFAULT_LEVELS)
     cli_args.add_object_properties(submit)
+    submit.add_argument(
+        "--uncertainty", choices=["none", "lab", "field"],
+        help="the errors P(success) is stated and certified under (default lab, as explore's)")
     submit.add_argument("--label", help="free text shown with the exploration")
     submit.add_argument("--wait", action="store_true",
                         help="wait until it finishes, with progress; exit status as explore's")
