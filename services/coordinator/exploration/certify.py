@@ -216,14 +216,34 @@ def plan(
     for wanted in (returned, candidates):
         for i, m in enumerate(order):
             room = -(-left // (len(order) - i))  # ceil: the first ones get the remainder
-            for w in wanted(m, bests[m.label]):  # type: ignore[arg-type]
-                if room <= 0:
-                    break
-                if w.pose.key() not in seen:
-                    seen.add(w.pose.key())
-                    out.append(w)
-                    room -= 1
-                    left -= 1
+            works = wanted(m, bests[m.label])  # type: ignore[arg-type]
+            whole = race is not None and wanted is returned
+            taken_now = _take(works, room, seen, whole_groups=whole)
+            out += taken_now
+            left -= len(taken_now)
+    return out
+
+
+def _take(works: Sequence[Work], room: int, seen: set[str], *,
+          whole_groups: bool) -> list[Work]:
+    """The works not seen yet, at most `room`. With `whole_groups` a centre's works are taken
+    all or none: a race's draws for a candidate run up to its next look, and a look cut short
+    gives a count the sequential rule has no bound for (n = 11 of a look at 12 reads [0, 1])."""
+    groups: dict[Point | None, list[Work]] = {}
+    fresh: set[str] = set()
+    for w in works:
+        key = w.pose.key()
+        if key not in seen and key not in fresh:
+            fresh.add(key)
+            groups.setdefault(w.centre if whole_groups else None, []).append(w)
+    out: list[Work] = []
+    for group in groups.values():
+        if whole_groups and len(group) > room:
+            continue
+        for w in group[:room]:
+            seen.add(w.pose.key())
+            out.append(w)
+        room -= min(room, len(group))
     return out
 
 

@@ -350,3 +350,17 @@ def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
     # Same spec, other worker count and report order: the same certification plan.
     again = _explore(sessions, object_id, _cap, workers=3, seed=7, search_rounds=0)
     assert _plan_of(sessions, again) == plan
+
+
+def test_a_race_s_look_is_planned_whole_or_not_at_all() -> None:
+    # Two candidates' draws up to their next look (12 each) and room for 20: the second look
+    # would be cut to 8 draws, a count the sequential rule has no bound for, so it waits.
+    works = [certify.Work(Pose(theta=0.5 + 0.01 * i, phi=0.1 * c, r=0.02), None, c, 0)
+             for c in (1, 2) for i in range(success.LOOKS[0])]
+    taken = certify._take(works, 20, set(), whole_groups=True)
+    assert [w.centre for w in taken] == [1] * success.LOOKS[0]
+    # Without looks (N_δ members), as many as fit.
+    assert len(certify._take(works, 20, set(), whole_groups=False)) == 20
+    # What was planned before is not planned again, and does not count against the room.
+    seen = {w.pose.key() for w in works[:6]}
+    assert len(certify._take(works, 18, seen, whole_groups=True)) == 18
