@@ -14,7 +14,7 @@ from typing import Any
 _WHERE = {
     **dict.fromkeys(("EXPORTS", "ApiError", "Client", "object_file_name"), "http"),
     **dict.fromkeys(("Best", "Exploration", "FailedTile", "Manifold", "Manifolds", "Pose",
-                     "Retried", "StoredObject", "Submitted"), "models"),
+                     "Retried", "StoredObject", "Submitted", "Success"), "models"),
 }
 __all__ = sorted(_WHERE)
 

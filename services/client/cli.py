@@ -83,9 +83,12 @@ def _best(args: argparse.Namespace) -> int:
         return 0
     print(f"best by {best.rank} (δ {best.delta_deg:.1f}°, {best.delta_mm:.1f} mm):")
     for p in best.poses:
+        e = p.success
+        chance = (f", P(success) {e.k}/{e.n}, 95 % bounds [{e.lower:.2f}, {e.upper:.2f}]"
+                  f"{', certified' if e.certified else ''}" if e is not None else "")
         print(f"  pose {p.id}: θ {math.degrees(p.theta):.1f}°, φ {math.degrees(p.phi):.1f}°, "
               f"r {p.r * 1000:.0f} mm, roll {math.degrees(p.roll):.0f}°, μs {p.mu_s:.3f}, "
-              f"{p.robust_label or p.outcome}")
+              f"{p.robust_label or p.outcome}{chance}")
     return 0 if best.poses else 1
 
 

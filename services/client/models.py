@@ -96,6 +96,18 @@ def _transform(position: Any, quaternion_xyzw: Any) -> np.ndarray:
     return out
 
 
+class Success(_Answer):
+    """A pose's P(success) under the exploration's uncertainty model: k of n draws held with its
+    grasp type, the anytime-valid 95 % bounds, and whether the lower bound clears the level."""
+
+    k: int
+    n: int
+    p: float
+    lower: float
+    upper: float
+    certified: bool
+
+
 class Pose(_Answer):
     """A stored pose (GET …/poses, …/best). Angles are radians and lengths metres, as the API
     answers them."""
@@ -117,6 +129,7 @@ class Pose(_Answer):
     robust_s: float | None = None
     robust_q: float | None = None
     robust_label: str | None = None
+    success: Success | None = None  # /best's answers only
 
     @property
     def transform(self) -> np.ndarray | None:
@@ -136,6 +149,8 @@ class Best(_Answer):
     rank: str
     delta_deg: float
     delta_mm: float
+    uncertainty: dict[str, Any] = {}
+    level: float = 0.9
     poses: list[Pose]
 
 

@@ -53,6 +53,10 @@ def test_submit_wait_and_read_the_map(live_url, sessions, tmp_path) -> None:
 
         best = api.best(run.id, limit=3)
         assert 1 <= len(best.poses) <= 3
+        # What P(success) is stated under comes with the answer, typed.
+        assert (best.rank, best.level, best.uncertainty["preset"]) == ("p_success", 0.9, "lab")
+        assert all(p.success is None or 0 <= p.success.lower <= p.success.p <= 1
+                   for p in best.poses)
         top = best.poses[0]
         assert top.viable and top.transform is not None and top.transform.shape == (4, 4)
         rotation = top.transform[:3, :3]
