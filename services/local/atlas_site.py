@@ -31,7 +31,7 @@ from graspscape.services.coordinator.datasets.formats import FORMATS
 from graspscape.services.coordinator.manifolds import best as ranking
 from graspscape.services.coordinator.manifolds import export
 from graspscape.services.coordinator.manifolds import service as manifolds
-from graspscape.services.coordinator.manifolds.summary import table_rows_of
+from graspscape.services.coordinator.manifolds.table import table_document
 from graspscape.services.coordinator.maps.picture import picture_bytes
 from graspscape.services.coordinator.store.models import ExplorationRow
 from graspscape.services.coordinator.web.data import directions
@@ -148,9 +148,7 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
     svg, _, _ = picture_bytes(session, eid, "svg", title=entry.name)
     (folder / "map.svg").write_bytes(svg)
     listed = manifolds.stored_manifolds(session, eid)
-    table = {"exploration_id": eid, "final": manifolds.is_final(session, eid),
-             "manifolds": [m.model_dump(mode="json") for m in listed],
-             "table": table_rows_of(listed)}
+    table = table_document(session, eid)  # as GET …/export/manifolds.json
     (folder / "manifolds.json").write_text(json.dumps(table, indent=1))
     exports = _write_exports(session, eid, folder)
     write_3d_data(session, eid, folder, exports)

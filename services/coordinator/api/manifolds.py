@@ -16,10 +16,6 @@ from fastapi.responses import StreamingResponse
 from graspscape.services.coordinator.api import answers
 from graspscape.services.coordinator.api.deps import SessionDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
-from graspscape.services.coordinator.api.manifold_success import (
-    ManifoldSuccess,
-    manifold_successes,
-)
 from graspscape.services.coordinator.api.responses import encoded, error
 from graspscape.services.coordinator.api.streams import ClosingStream
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
@@ -31,8 +27,11 @@ from graspscape.services.coordinator.manifolds.p_success import SuccessOut
 from graspscape.services.coordinator.manifolds.robust import coarser_for_error, error_in_steps
 from graspscape.services.coordinator.manifolds.summary import (
     ManifoldSummary,
-    dust_line,
-    table_rows_of,
+)
+from graspscape.services.coordinator.manifolds.table import (
+    ManifoldSuccess,
+    manifold_successes,
+    table_document,
 )
 from graspscape.services.coordinator.maps.stored import draw_finished_maps_ahead
 from pydantic import BaseModel, Field
@@ -66,11 +65,6 @@ class ManifoldList(BaseModel):
         default_factory=dict, description="by label, each large manifold's best grasp by "
         "rank=p_success with its k of n draws, bounds and claim (a manifold whose best has "
         "no certified claim says so with certified false)")
-
-
-def _dust(items: list[ManifoldSummary]) -> DustLine | None:
-    line = dust_line(items)
-    return DustLine(**line) if line is not None else None
 
 
 class ManifoldTable(ManifoldList):
@@ -159,16 +153,6 @@ def _manifolds_body(session: Any, exploration_id: int) -> bytes:
     tail = json.dumps({k: v.model_dump(mode="json") for k, v in success.items()})
     return (f'{head}, "manifolds": [{", ".join(m.summary for m in items)}], '
             f'"dust": {json.dumps(dust)}, "success": {tail}}}'.encode())
-
-
-def _manifold_list(exploration_id: int, session: Any) -> ManifoldList:
-    """The list as models (the JSON export adds its short rows to it)."""
-    items = manifolds.stored_manifolds(session, exploration_id)
-    success = manifold_successes(session, exploration_id,
-                                  [m.label for m in items if m.large])
-    return ManifoldList(exploration_id=exploration_id,
-                        final=manifolds.is_final(session, exploration_id),
-                        manifolds=items, dust=_dust(items), success=success)
 
 
 @router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
@@ -371,15 +355,4 @@ def export_parquet(exploration_id: Id, request: Request, session: SessionDep) ->
             response_model=ManifoldTable, responses=_NOT_FOUND,
             summary="The manifold table (summaries and short rows), JSON")
 def export_manifolds(exploration_id: Id, session: SessionDep) -> Any:
-    listed = _manifold_list(exploration_id, session)
-    rows = table_rows_of(listed.manifolds)
-    for row in rows:  # the P(success) of each large manifold's best grasp beside its scores
-        chance = listed.success.get(row["label"])
-        e = chance.success if chance is not None else None
-        if row["label"] != "dust":
-            row.update(p_success_best=chance.pose_key if chance else None,
-                       p_success_k=e.k if e else None, p_success_n=e.n if e else None,
-                       p_success_lower=round(e.lower, 4) if e else None,
-                       p_success_upper=round(e.upper, 4) if e else None,
-                       certified=e.certified if e else False)
-    return ManifoldTable(**dict(listed), table=rows)
+    return table_document(session, exploration_id)

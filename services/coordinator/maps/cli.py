@@ -143,25 +143,16 @@ def _export(args: argparse.Namespace) -> int:
     from graspscape.services.coordinator.manifolds import export
     from graspscape.services.coordinator.manifolds.service import (
         ensure_manifolds,
-        stored_manifolds,
     )
 
     sessions = _sessions(args)
     with sessions() as session:
         ensure_manifolds(session, args.exploration_id)
         if args.what == "manifolds.json":  # as GET …/export/manifolds.json
-            from graspscape.services.coordinator.manifolds.service import is_final
-            from graspscape.services.coordinator.manifolds.summary import (
-                dust_line,
-                table_rows_of,
-            )
+            from graspscape.services.coordinator.manifolds.table import table_document
 
-            items = stored_manifolds(session, args.exploration_id)
-            args.out.write_text(json.dumps({
-                "exploration_id": args.exploration_id,
-                "final": is_final(session, args.exploration_id),
-                "manifolds": [m.model_dump(mode="json") for m in items],
-                "dust": dust_line(items), "table": table_rows_of(items)}, indent=2))
+            args.out.write_text(json.dumps(table_document(session, args.exploration_id),
+                                           indent=2))
         else:
             with args.out.open("wb") as out:  # streamed in chunks, as the REST export
                 export.write_poses(session, args.exploration_id,
