@@ -7,14 +7,12 @@ no ETA is shown for a finished run or before one can be estimated."""
 from __future__ import annotations
 
 import math
-import threading
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-import uvicorn
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.app import create_app
 from graspscape.services.coordinator.exploration.service import create_exploration
@@ -26,6 +24,7 @@ from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.results import GraspSignature
 
 from tests.factories import oracle_result
+from tests.live_server import serving
 
 pytestmark = pytest.mark.slow
 
@@ -69,25 +68,8 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
                                     tile_target_poses=50, max_poses=10**6).id
     settings = Settings(database={"url": url, "data_dir": folder},
                         api={"token": None}, queue={"requeue_interval_s": 3600})
-    server = uvicorn.Server(uvicorn.Config(create_app(settings), host="127.0.0.1", port=0,
-                                           log_level="warning"))
-    started = threading.Event()
-    startup = server.startup
-
-    async def signal_started(sockets=None):  # type: ignore[no-untyped-def]
-        await startup(sockets)
-        started.set()
-
-    server.startup = signal_started  # type: ignore[method-assign]
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    assert started.wait(60)
-    port = server.servers[0].sockets[0].getsockname()[1]
-    try:
-        yield {"base": f"http://127.0.0.1:{port}", "done": done, "queued": queued}
-    finally:
-        server.should_exit = True
-        thread.join(30)
+    with serving(create_app(settings), start_timeout_s=60) as base:
+        yield {"base": base, "done": done, "queued": queued}
         engine.dispose()
 
 
