@@ -36,6 +36,25 @@ def _mean(xs: list[float]) -> float | None:
     return round(float(np.mean(xs)), 4) if xs else None
 
 
+def _pooled(rows: list[dict], rankings: tuple[str, ...]) -> dict[str, float | int | None]:
+    """Calibration (poses with n ≥ 30), Brier score, each ranking's AUC for fresh survival
+    ≥ the level, and the certified poses with the share of them that fell below it."""
+    out: dict[str, float | int | None] = {}
+    big = [r for r in rows if r["n"] >= 30]
+    out["calibration_mae"] = _mean([abs(r["p"] - r["fresh_survival"]) for r in big])
+    out["brier"] = _mean([r["p"] ** 2 - 2 * r["p"] * r["fresh_survival"] + r["fresh_survival"]
+                          for r in rows if r["n"]])
+    good = [r["fresh_survival"] >= LEVEL for r in rows]
+    for name in rankings:
+        a = auc([_score(r, name) for r in rows], good)
+        out[f"auc_{name}"] = None if a is None else round(a, 4)
+    cert = [r for r in rows if r["certified"]]
+    out["certified_poses"] = len(cert)
+    out["false_certification_share"] = (
+        round(sum(r["fresh_survival"] < LEVEL for r in cert) / len(cert), 4) if cert else None)
+    return out
+
+
 def one(res: dict, rankings: tuple[str, ...]) -> dict:
     """The figures of one object under one model."""
     rows = {r["key"]: r for r in res["rows"]}
@@ -46,19 +65,8 @@ def one(res: dict, rankings: tuple[str, ...]) -> dict:
         picks = [k for ks in res["picks"][r].values() for k in ks]
         out[f"top3_fresh_survival_{r}"] = _mean([rows[k]["fresh_survival"] for k in picks])
     scored = list(rows.values())
-    big = [r for r in scored if r["n"] >= 30]
-    out["calibration_mae"] = _mean([abs(r["p"] - r["fresh_survival"]) for r in big])
-    out["calibration_poses"] = len(big)
-    out["brier"] = _mean([r["p"] ** 2 - 2 * r["p"] * r["fresh_survival"] + r["fresh_survival"]
-                          for r in scored if r["n"]])
-    good = [r["fresh_survival"] >= LEVEL for r in scored]
-    for name in rankings:
-        a = auc([_score(r, name) for r in scored], good)
-        out[f"auc_{name}"] = None if a is None else round(a, 4)
-    cert = [r for r in scored if r["certified"]]
-    out["certified_poses"] = len(cert)
-    out["false_certification_share"] = (
-        round(sum(r["fresh_survival"] < LEVEL for r in cert) / len(cert), 4) if cert else None)
+    out.update(_pooled(scored, rankings))
+    out["calibration_poses"] = sum(1 for r in scored if r["n"] >= 30)
     out["certified_in_overall_top"] = bool(
         res["overall"]["p_success"] and rows[res["overall"]["p_success"]]["certified"])
     out["extra_evaluation_share"] = round(res["draws"]["run"] / res["evaluations"], 4)
@@ -77,18 +85,7 @@ def figures_of(results: list[dict], rankings: tuple[str, ...]) -> tuple[dict, di
             name = f"{top}_fresh_survival_{r}"
             figures[name] = _mean([d[name] for d in detail.values() if d[name] is not None])
     rows = [row for r in results for row in r["rows"]]
-    big = [r for r in rows if r["n"] >= 30]
-    figures["calibration_mae"] = _mean([abs(r["p"] - r["fresh_survival"]) for r in big])
-    figures["brier"] = _mean([r["p"] ** 2 - 2 * r["p"] * r["fresh_survival"]
-                              + r["fresh_survival"] for r in rows if r["n"]])
-    good = [r["fresh_survival"] >= LEVEL for r in rows]
-    for name in rankings:
-        a = auc([_score(r, name) for r in rows], good)
-        figures[f"auc_{name}"] = None if a is None else round(a, 4)
-    cert = [r for r in rows if r["certified"]]
-    figures["certified_poses"] = len(cert)
-    figures["false_certification_share"] = (
-        round(sum(r["fresh_survival"] < LEVEL for r in cert) / len(cert), 4) if cert else None)
+    figures.update(_pooled(rows, rankings))
     figures["extra_evaluation_share"] = round(
         sum(r["draws"]["run"] for r in results) / sum(r["evaluations"] for r in results), 4)
     figures["scored_poses"] = len(rows)
