@@ -10,13 +10,13 @@ held, and the jitters that certify it.
 from __future__ import annotations
 
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from enum import StrEnum
 
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.p_success import estimates
+from graspscape.services.coordinator.manifolds.p_success import SuccessOut, estimates
 from graspscape.services.coordinator.manifolds.robust import (
     Neighbourhoods,
     RobustLabel,
@@ -157,12 +157,23 @@ def _ranking(rank: Rank) -> queries.Ranking:
     return queries.Ranking(rank.value, lower_is_better=rank in LOWER_IS_BETTER)
 
 
+def best_by_p_success(session: Session, exploration_id: int, est: Mapping[str, SuccessOut],
+                      *, label: int | None = None, limit: int = 1) -> list[PoseRow]:
+    """`best_poses(rank=p_success)` with the exploration's estimates read once by the caller
+    (the manifold table asks it for every large manifold)."""
+    return _best_p_success(session, exploration_id, label=label, cone_axis=None,
+                           cone_half_angle=None, max_effort_nm=None, limit=limit, coarser=0,
+                           est=est)
+
+
 def _best_p_success(session: Session, exploration_id: int, *, label: int | None,
                     cone_axis: tuple[float, float, float] | None, cone_half_angle: float | None,
-                    max_effort_nm: float | None, limit: int, coarser: int) -> list[PoseRow]:
+                    max_effort_nm: float | None, limit: int, coarser: int,
+                    est: Mapping[str, SuccessOut] | None = None) -> list[PoseRow]:
     """Poses with draws by the lower bound of P(success) (then k/n, μs, key), then the rest
     by the robust order, each passing the filters."""
-    est = estimates(session, exploration_id)
+    if est is None:
+        est = estimates(session, exploration_id)
     filters = dict(label=label, cone_axis=cone_axis, cone_half_angle=cone_half_angle,
                    max_effort_nm=max_effort_nm)
     # Only the sampled poses are read for the first part: not every viable pose of the map.

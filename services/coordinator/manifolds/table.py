@@ -28,16 +28,16 @@ class ManifoldSuccess(BaseModel):
 
 def manifold_successes(session: Session, exploration_id: int,
                        labels: Iterable[int]) -> dict[str, ManifoldSuccess]:
-    """The first answer of /best?manifold=L (rank p_success) of each label, with P(success)."""
-    firsts = {}
+    """The first answer of /best?manifold=L (rank p_success) of each label, with P(success):
+    the exploration's estimates read once for every label."""
+    est = p_success.estimates(session, exploration_id)
+    out = {}
     for number in labels:
-        rows = ranking.best_poses(session, exploration_id, label=number, limit=1,
-                                  rank=ranking.Rank.P_SUCCESS)
+        rows = ranking.best_by_p_success(session, exploration_id, est, label=number, limit=1)
         if rows:
-            firsts[label_name(number)] = rows[0].pose_key
-    chances = p_success.estimates(session, exploration_id, firsts.values()) if firsts else {}
-    return {name: ManifoldSuccess(pose_key=key, success=chances.get(key))
-            for name, key in firsts.items()}
+            key = rows[0].pose_key
+            out[label_name(number)] = ManifoldSuccess(pose_key=key, success=est.get(key))
+    return out
 
 
 def _with_success(rows: list[dict[str, Any]],
