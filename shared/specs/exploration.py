@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 from graspscape.shared.specs.gripper import find_gripper, unknown_gripper_message
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import POLICY_NAMES, SimSettings
+from graspscape.shared.specs.support import RestingPose, SupportSpec, support_problem, table_scene
 from graspscape.shared.specs.uncertainty import UncertaintyModel
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -348,6 +349,24 @@ class ExplorationSpec(BaseModel):
         "restarts, `poses` evaluations) or 'ppo' (PPO, `poses` evaluations; optional extra "
         "`rl`)",
     )
+
+    support: SupportSpec = Field(
+        default_factory=SupportSpec,
+        description="what the object rests on: 'none' (free-floating) or 'plane' (a table; "
+        "one exploration per chosen stable resting pose, docs/concepts/support.md)")
+
+    @model_validator(mode="after")
+    def _support_matches_settings(self) -> ExplorationSpec:
+        problem = support_problem(self.support, self.settings.table, self.settings.engine)
+        if problem is not None:
+            raise ValueError(problem)
+        return self
+
+    def at_rest(self, resting: RestingPose) -> ExplorationSpec:
+        """This spec (support 'plane') at one resting pose, in its support and settings."""
+        support = self.support.model_copy(update={"resting": resting})
+        settings = self.settings.model_copy(update={"table": table_scene(support)})
+        return self.model_copy(update={"support": support, "settings": settings})
 
     @field_validator("gripper")
     @classmethod

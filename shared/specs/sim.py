@@ -8,6 +8,7 @@ from typing import Literal
 
 from graspscape.shared.specs.haptic import HapticPolicySettings
 from graspscape.shared.specs.robustness import RobustnessSettings
+from graspscape.shared.specs.support import TableScene
 from pydantic import BaseModel, ConfigDict, Field
 
 # The grasp synthesis policies the workers register (workers/sim/policies), named here so a
@@ -144,3 +145,7 @@ class SimSettings(BaseModel):
         default_factory=RobustnessSettings,
         description="margins and grasp tests run on every held pose (none by default)")
     spread_mode: str = "basic"
+    table: TableScene | None = Field(
+        default=None,
+        description="the table the object rests on (set by the coordinator for an exploration "
+        "with support 'plane'); None: the free-floating object")
