@@ -20,6 +20,11 @@ class Outcome(StrEnum):
     NO_GRASP = "no_grasp"  # the hand closed but the object was not enclosed
     NO_CONTACT = "no_contact"  # the approach never touched the object
     INFEASIBLE = "infeasible"  # the start pose could not be placed without interpenetration
+    # On a table (support 'plane'): the hand at its start pose reaches into the table, so the
+    # pose is not simulated; the hand moved the object on the table (tipped or dragged it
+    # beyond the table's tolerances) before lift-off.
+    INFEASIBLE_TABLE = "infeasible_table"
+    KNOCKED = "knocked"
     ERROR = "error"  # the evaluation of this pose raised; PoseResult.error says what
 
 

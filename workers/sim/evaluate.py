@@ -55,6 +55,7 @@ from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, r
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.start_pose import StartPose, place_hand, start_pose
+from graspscape.workers.sim.table import TableWatch, add_table, hand_in_table, lift_off
 from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
 
 FIXTURE_MAX_FORCE_N = 5000.0
@@ -75,10 +76,15 @@ class Evaluator:
                                     numSolverIterations=physics.solver_iterations,
                                     deterministicOverlappingPairs=1, physicsClientId=cid)
         offset = np.array(world_offset, dtype=float)
-        object_body = spawn_object(cid, prepared, tuple(offset))
+        table = self.settings.table
+        # On a table the object starts at its resting attitude (world = table frame); the
+        # fixture, should a test hold it, holds it there.
+        attitude = [0.0, 0.0, 0.0, 1.0] if table is None else list(table.resting.quaternion)
+        object_body = spawn_object(cid, prepared, tuple(offset), attitude)
         hand = Hand(cid, gripper, work_dir / "urdf")
         fixture = p.createConstraint(object_body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0],
-                                     [0, 0, 0], offset.tolist(), physicsClientId=cid)
+                                     [0, 0, 0], offset.tolist(), childFrameOrientation=attitude,
+                                     physicsClientId=cid)
         park = offset + np.array([0.0, 0.0, 2.0])
         com, orn = hand.com_pose_for(park, np.eye(3))
         p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=cid)
@@ -88,6 +94,10 @@ class Evaluator:
         self.scene = Scene(client=cid, hand=hand, object_body=object_body,
                            drive_constraint=drive, fixture_constraint=fixture, offset=offset,
                            dt=physics.dt)
+        if table is not None:
+            self.scene.table_body = add_table(cid, table, offset, prepared.friction)
+            self.scene.rest_rotation = table.resting.rotation()
+            self.scene.watch = TableWatch(table, self.scene.object_pose())
         inertia = np.array(prepared.inertia_diag, dtype=float)
         metric = self.settings.metric
         if metric.characteristic_length == "radius_of_gyration":
@@ -120,8 +130,13 @@ class Evaluator:
         policy = self.settings.policy
         effort = policy.closing_effort or self.gripper.closing_effort
         scene.hand.reset_open(self.spread, effort, policy.hold_effort_factor)
-        p.changeConstraint(scene.fixture_constraint, jointChildPivot=scene.offset.tolist(),
-                           maxForce=FIXTURE_MAX_FORCE_N, physicsClientId=cid)
+        if self.settings.table is None:
+            p.changeConstraint(scene.fixture_constraint, jointChildPivot=scene.offset.tolist(),
+                               maxForce=FIXTURE_MAX_FORCE_N, physicsClientId=cid)
+        else:  # free on the table, under its own weight (workers/sim/table.py)
+            p.changeConstraint(scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
+            scene.object_weight_n = self.prepared.mass_kg * self.settings.trajectory.gravity_m_s2
+            scene.watch.reset()
 
     def _place(self, position: np.ndarray, rotation: np.ndarray) -> None:
         place_hand(self.client, self.scene, position, rotation)
@@ -158,9 +173,14 @@ class Evaluator:
             return self._finish(started, Outcome.INFEASIBLE, result), None
         position, rotation, target, gap = start
         result["effective_r"] = gap
+        table = self.settings.table
+        if table is not None and hand_in_table(self.scene):
+            return self._finish(started, Outcome.INFEASIBLE_TABLE, result), None
 
         outcome = self.policy.synthesize(self.scene, position, rotation, target,
                                          self.settings, phases)
+        if table is not None and self.scene.watch.knocked:
+            outcome = Outcome.KNOCKED
         if outcome is not None:
             return self._finish(started, outcome, result), None
 
@@ -222,6 +242,9 @@ class Evaluator:
         t0 = time.perf_counter()
         p.changeConstraint(scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
         p.setGravity(0, 0, -spec.gravity_m_s2, physicsClientId=cid)
+        scene.object_weight_n = 0.0  # gravity is global from here on
+        if self.settings.table is not None:
+            lift_off(scene, self.settings.table, phases)
         start_pos, start_rot = hand.frame_pose()
         dt = scene.dt
         scene.drive_to(start_pos, start_rot)

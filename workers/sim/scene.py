@@ -19,6 +19,7 @@ from graspscape.workers.sim.bullet import (
 )
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.gripper.hand import Hand
+from graspscape.workers.sim.table import TableWatch
 
 DRIVE_MAX_FORCE_N = 2000.0
 CONTACT_DISTANCE_M = 1e-4
@@ -35,6 +36,14 @@ class Scene:
     fixture_constraint: int
     offset: np.ndarray
     dt: float
+    # On a table (workers/sim/table.py): the table body, the object's resting rotation in the
+    # world (the pose space stays the object's frame) and its weight, applied to it alone
+    # while the hand approaches and closes (0: none applied).
+    table_body: int | None = None
+    rest_rotation: np.ndarray | None = None
+    object_weight_n: float = 0.0
+    # While the weight is applied: the watch that tells a knocked object (table.TableWatch).
+    watch: TableWatch | None = None
     # The last rotation drive_to converted, as bytes, and its quaternion: the approach drives
     # to one rotation every step, which needs converting once.
     _last_rotation: tuple[bytes, list[float]] = field(default=(b"", []), init=False,
@@ -58,10 +67,24 @@ class Scene:
                            maxForce=max_force, physicsClientId=self.client)
 
     def step(self) -> None:
+        if self.object_weight_n:
+            if self.watch is not None:
+                self.watch.look(self)
+            # An external force lasts one step: applied again before every step.
+            position = p.getBasePositionAndOrientation(self.object_body,
+                                                       physicsClientId=self.client)[0]
+            p.applyExternalForce(self.object_body, -1, [0.0, 0.0, -self.object_weight_n],
+                                 position, p.WORLD_FRAME, physicsClientId=self.client)
         p.stepSimulation(physicsClientId=self.client)
 
     def in_contact(self) -> bool:
         return bool(self._touching())
+
+    def hand_on_table(self) -> bool:
+        """Whether the hand touches the table (never without one)."""
+        if self.table_body is None:
+            return False
+        return bool(get_contact_points(self.client, self.hand.body, self.table_body))
 
     def palm_in_contact(self) -> bool:
         return -1 in self._touching()

@@ -20,6 +20,17 @@ from graspscape.workers.sim.start_gap import first_clear_gap
 StartPose = tuple[np.ndarray, np.ndarray, np.ndarray, float]
 
 
+def at_rest(placement: Placement, rotation: np.ndarray | None) -> Placement:
+    """The placement turned with the object to its resting attitude on a table (None: the
+    free object, whose frame is the world's)."""
+    if rotation is None:
+        return placement
+    return Placement(position=rotation @ placement.position,
+                     rotation=rotation @ placement.rotation,
+                     nearest_point=rotation @ placement.nearest_point,
+                     surface_normal=rotation @ placement.surface_normal, gap=placement.gap)
+
+
 def place_hand(client: object, scene: Scene, position: np.ndarray, rotation: np.ndarray) -> None:
     """The open hand at rest with its gripper frame at (position, rotation); `client` is
     unused (the scene knows its engine), kept for callers."""
@@ -36,7 +47,7 @@ def start_pose(client: int, scene: Scene, mesh: object, pose: Pose,
                settings: PlacementSettings) -> StartPose | None:
     """World start pose of the gripper frame, the target x_c and the effective r; None where
     the hand cannot start clear of the object (`on_interpenetration`, `max_backoff_m`)."""
-    placement = place_gripper(mesh, pose)
+    placement = at_rest(place_gripper(mesh, pose), getattr(scene, "rest_rotation", None))
     position = scene.offset + placement.position
     gap = placement.gap
     if settings.start_gap == "clearance":

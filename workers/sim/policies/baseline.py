@@ -25,6 +25,13 @@ BLOCKED_ADVANCE_M = 0.0005
 APPROACH_TIME_CAP_S = 1.5
 
 
+def on_table(scene) -> bool:
+    """Whether the hand rests on a table (support 'plane'): fingertips stopped by the table
+    close from there, as a hand lowered onto a small object does."""
+    touching = getattr(scene, "hand_on_table", None)
+    return bool(touching is not None and touching())
+
+
 @register_policy("baseline")
 class BaselinePolicy:
 
@@ -62,11 +69,11 @@ class BaselinePolicy:
                 if np.dot(now - start, direction) >= travel_limit:
                     break
                 stopped = bool(np.linalg.norm(now - last) < BLOCKED_ADVANCE_M
-                               and scene.in_contact())
+                               and (scene.in_contact() or on_table(scene)))
                 last = now
         phases.approach_steps = steps
         phases.approach_s = time.perf_counter() - t0
-        if not scene.in_contact():
+        if not scene.in_contact() and not on_table(scene):
             return Outcome.NO_CONTACT
 
         return close_fingers(scene, settings, phases)
