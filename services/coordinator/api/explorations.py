@@ -51,15 +51,16 @@ def _float(description: str) -> Any:
     summary="Submit an exploration; its coarse-pass tiles are queued at once",
 )
 def submit(spec: ExplorationSpec, session: SessionDep, settings: SettingsDep) -> Any:
-    row = service.create_exploration(
+    rows = service.create_explorations(
         session,
         spec=spec,
         tile_target_poses=settings.queue.tile_target_poses,
         max_poses=settings.queue.max_poses_per_exploration,
     )
+    row = rows[0]
     return ExplorationCreated(
-        id=row.id, status=row.status, tiles_total=row.tiles_total, poses_total=row.poses_total
-    )
+        id=row.id, status=row.status, tiles_total=row.tiles_total, poses_total=row.poses_total,
+        group=[r.id for r in rows] if row.support_group is not None else [])
 
 
 @router.get("/explorations", response_model=Page[ExplorationOut], summary="List explorations")

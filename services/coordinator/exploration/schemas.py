@@ -28,6 +28,13 @@ class ExplorationOut(BaseModel):
     updated_at: datetime
     started_at: datetime | None
     finished_at: datetime | None
+    support_group: int | None = Field(
+        default=None, description="on a table: the id of the first exploration of the group "
+        "submitted together, one per resting pose (null: a free object)")
+    resting_index: int | None = Field(
+        default=None, description="on a table: the rank of this exploration's resting pose")
+    resting_probability: float | None = Field(
+        default=None, description="on a table: how likely the object comes to rest so")
 
 
 class Progress(BaseModel):
@@ -95,6 +102,9 @@ class ExplorationCreated(BaseModel):
     status: str
     tiles_total: int
     poses_total: int
+    group: list[int] = Field(
+        default_factory=list, description="on a table: every exploration submitted, one per "
+        "resting pose, most probable first (`id` is the first); empty for a free object")
 
 
 class PoseOut(PoseValues):

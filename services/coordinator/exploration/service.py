@@ -15,6 +15,7 @@ from graspscape.services.coordinator.exploration.schemas import (
     PoseOut,
     Progress,
 )
+from graspscape.services.coordinator.exploration.support import resting_specs
 from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.store import queue, tiles
 from graspscape.services.coordinator.store.base import utcnow
@@ -39,11 +40,33 @@ from sqlalchemy.orm import Session
 def create_exploration(
     session: Session, *, spec: ExplorationSpec, tile_target_poses: int, max_poses: int
 ) -> ExplorationRow:
+    """Submits `spec`; on a plane, one exploration per chosen resting pose (the first is
+    returned, the others share its `support_group`)."""
+    return create_explorations(session, spec=spec, tile_target_poses=tile_target_poses,
+                               max_poses=max_poses)[0]
+
+
+def create_explorations(
+    session: Session, *, spec: ExplorationSpec, tile_target_poses: int, max_poses: int
+) -> list[ExplorationRow]:
+    """Submits `spec` as one exploration, or on a plane (support 'plane' without a resting
+    pose) as one per chosen resting pose of the object, grouped (support.py); one commit."""
     if session.get(ObjectRow, spec.object_id) is None:
         raise InvalidInput(
             f"object_id {spec.object_id} does not exist; upload it to /objects",
             loc=("body", "object_id"),
         )
+    specs = resting_specs(session, spec)
+    rows = [_add_exploration(session, one, tile_target_poses, max_poses) for one in specs]
+    if spec.support.kind == "plane":
+        for row in rows:
+            row.support_group = rows[0].id
+    session.commit()
+    return rows
+
+
+def _add_exploration(session: Session, spec: ExplorationSpec, tile_target_poses: int,
+                     max_poses: int) -> ExplorationRow:
     spec = resolve_grid(session, spec)
     poses_total, first_tiles = initial_tiles(session, spec, target_poses=tile_target_poses)
     if poses_total > max_poses:
@@ -53,6 +76,7 @@ def create_exploration(
             loc=("body", "grid"),
         )
     now = utcnow()
+    resting = spec.support.resting
     row = ExplorationRow(
         object_id=spec.object_id,
         spec=spec.model_dump(mode="json"),
@@ -63,11 +87,12 @@ def create_exploration(
         viable_count=0,
         created_at=now,
         updated_at=now,
+        resting_index=None if resting is None else resting.index,
+        resting_probability=None if resting is None else resting.probability,
     )
     session.add(row)
     session.flush()
     tiles.add_tiles(session, exploration_id=row.id, level=0, tiles=first_tiles, now=now)
-    session.commit()
     return row
 
 

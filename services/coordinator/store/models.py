@@ -99,6 +99,12 @@ class ExplorationRow(Base):
     # (null: never), and whether it was the final refresh of the finished exploration.
     manifolds_poses_done: Mapped[int | None] = mapped_column(Integer)
     manifolds_final: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+    # On a table (support 'plane', migration 0017): the group of explorations of one
+    # submission, one per resting pose (the id of its first), and this one's resting pose's
+    # rank and probability (the pose itself: spec.support.resting). Null: a free object.
+    support_group: Mapped[int | None] = mapped_column(Integer, index=True)
+    resting_index: Mapped[int | None] = mapped_column(Integer)
+    resting_probability: Mapped[float | None] = mapped_column(Float)
 
 
 class TileRow(Base):

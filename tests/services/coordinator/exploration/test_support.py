@@ -1,0 +1,54 @@
+"""An object on a table, as submitted: one exploration per chosen resting pose, grouped, each
+storing its resting pose; the workers are told the table through the settings."""
+
+from __future__ import annotations
+
+import numpy as np
+from graspscape.services.coordinator.dispatch.catalog import WorkContexts
+from graspscape.services.coordinator.store.models import ExplorationRow
+from graspscape.shared.specs.exploration import ExplorationSpec
+
+COARSE = {"dtheta": 1.2, "r_min": 0.02, "r_max": 0.02}
+
+
+def test_a_plane_submits_one_exploration_per_resting_pose(client, named_object, sessions):
+    mug = named_object("mug")
+    spec = {"object_id": mug, "grid": COARSE, "support": {"kind": "plane"}}
+    created = client.post("/explorations", json=spec)
+    assert created.status_code == 201, created.text
+    group = created.json()["group"]
+    assert 1 <= len(group) <= 4 and created.json()["id"] == group[0]
+    rows = [client.get(f"/explorations/{i}").json() for i in group]
+    probabilities = [row["resting_probability"] for row in rows]
+    assert all(p >= 0.05 for p in probabilities)
+    assert probabilities == sorted(probabilities, reverse=True)
+    assert {row["support_group"] for row in rows} == {group[0]}
+    assert [row["resting_index"] for row in rows] == list(range(len(group)))
+    ups = []
+    for row in rows:
+        spec_i = ExplorationSpec.model_validate(row["spec"])
+        resting = spec_i.support.resting
+        assert resting is not None and spec_i.settings.table.resting == resting
+        ups.append(resting.up())
+    # Different resting poses: the table's up differs in the object's frame.
+    assert min(np.linalg.norm(a - b) for i, a in enumerate(ups) for b in ups[i + 1:]) > 0.1
+    with sessions() as s:
+        created_at = s.get(ExplorationRow, group[1]).created_at
+        context = WorkContexts().context(s, group[1], created_at)
+    assert context.settings.table is not None
+    assert context.settings.table.friction == 0.5
+
+
+def test_a_free_object_is_no_group(client, object_id):
+    created = client.post("/explorations", json={"object_id": object_id, "grid": COARSE})
+    assert created.status_code == 201
+    assert created.json()["group"] == []
+    assert client.get(f"/explorations/{created.json()['id']}").json()["support_group"] is None
+
+
+def test_a_plane_on_mujoco_is_refused_naming_the_engine(client, object_id):
+    spec = {"object_id": object_id, "support": {"kind": "plane"},
+            "settings": {"engine": "mujoco"}}
+    refused = client.post("/explorations", json=spec)
+    assert refused.status_code == 422
+    assert "pybullet" in refused.text
