@@ -116,6 +116,17 @@ def add_grid(parser: argparse.ArgumentParser, *, dtheta: float, r: tuple[float, 
                         f"neighbouring poses differ (default {levels})")
 
 
+def add_support(parser: argparse.ArgumentParser) -> None:
+    """What the object rests on (docs/concepts/support.md): nothing, or a table."""
+    parser.add_argument("--support", choices=["none", "plane"],
+                        help="none: the free-floating object (default); plane: the object at "
+                        "rest on a table, one exploration per stable resting pose (at least "
+                        "5 %% likely, at most 4)")
+    parser.add_argument("--support-friction", type=bounded("(friction coefficient)", 0, 3,
+                                                           low_open=True),
+                        metavar="MU", help="object–table friction coefficient (default 0.5)")
+
+
 def add_procs(parser: argparse.ArgumentParser, help_text: str = "worker processes "
               "(default: cores)", *, low: int = 1) -> None:
     parser.add_argument("--procs", type=bounded("processes", low, 4096, integer=True),

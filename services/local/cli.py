@@ -41,6 +41,8 @@ def _explore(args: argparse.Namespace) -> int:
         "quiet": args.quiet,
         "new": args.new,
         "uncertainty": args.uncertainty,
+        "support": args.support,
+        "support_friction": args.support_friction,
     }
     return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
 
@@ -60,6 +62,7 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
     cli_args.add_procs(explore)
     cli_args.add_store(explore, data_dir_default="data", url=False)
     cli_args.add_object_properties(explore)
+    cli_args.add_support(explore)
     explore.add_argument(
         "--robustness", metavar="TESTS",
         help="robustness tests run on every held pose, comma-separated "

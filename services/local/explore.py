@@ -32,6 +32,7 @@ from graspscape.services.coordinator.exploration.service import (
     create_exploration,
     failure_summary,
 )
+from graspscape.services.coordinator.exploration.support import resting_specs
 from graspscape.services.coordinator.maps.picture import write_map_files
 from graspscape.services.coordinator.settings import (
     DatabaseSettings,
@@ -54,6 +55,7 @@ from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, R
 from graspscape.shared.specs.objects import LengthUnit
 from graspscape.shared.specs.robustness import TestName
 from graspscape.shared.specs.sim import EngineName
+from graspscape.shared.specs.support import SupportKind, SupportSpec
 from graspscape.shared.specs.uncertainty import UncertaintyModel
 from graspscape.workers.runtime.config import WorkerConfig, default_procs
 from graspscape.workers.runtime.supervisor import Supervisor
@@ -85,6 +87,8 @@ class ExploreOptions(BaseModel):
     new: bool = Field(default=False, description="explore again where this very exploration "
                       "is done")
     uncertainty: Literal["none", "lab", "field"] = "lab"
+    support: SupportKind = "none"
+    support_friction: float | None = Field(default=None, gt=0.0, le=3.0)
 
 
 def _free_port() -> int:
@@ -106,7 +110,8 @@ def _exploration(session: Session, spec: ExplorationSpec, settings: Settings,
     one. (id, how: "done", "resuming" or "exploration", tiles retried)"""
     # As stored: with the grid's azimuth multiple decided at submission (else no stored spec
     # ever equals the one asked for, and nothing was resumed).
-    wanted = resolve_grid(session, spec).model_dump(mode="json")
+    # On a plane, the group is found by its first exploration (the most probable resting pose).
+    wanted = resolve_grid(session, resting_specs(session, spec)[0]).model_dump(mode="json")
     reusable = _UNFINISHED + _RETRYABLE + (() if new else (ExplorationStatus.DONE,))
     for row in session.scalars(
         select(ExplorationRow)
@@ -204,6 +209,8 @@ def _spec(opts: ExploreOptions) -> ExplorationSpec:
         refinement=RefinementSpec(levels=opts.levels),
         uncertainty=UncertaintyModel(preset=opts.uncertainty),
         label=f"graspscape explore {opts.object}",
+        support=SupportSpec(kind=opts.support, **({} if opts.support_friction is None else
+                                                  {"friction": opts.support_friction})),
     )
     if opts.engine is not None:
         spec = spec.model_copy(update={"settings": spec.settings.model_copy(
@@ -329,8 +336,37 @@ def run_explore(opts: ExploreOptions) -> int:
     )
     wire()
     engine, sessions = open_store(settings.database.resolved_url)
-    exploration_id, how, retried, total = _plan(opts, sessions, settings)
+    first_id, how, retried, _ = _plan(opts, sessions, settings)
+    statuses = []
+    try:
+        for exploration_id in _group(sessions, first_id):
+            statuses.append(_explore_one(opts, sessions, settings, endpoint,
+                                         exploration_id, how, retried))
+            if statuses[-1] == EXIT_INTERRUPTED:
+                break
+    finally:
+        engine.dispose()
+    return max(statuses, key=lambda code: (code == EXIT_INTERRUPTED, code != EXIT_DONE))
+
+
+def _group(sessions: sessionmaker[Session], exploration_id: int) -> list[int]:
+    """The exploration, or on a table every exploration of its group (one per resting pose)."""
+    with sessions() as session:
+        group = session.scalar(select(ExplorationRow.support_group)
+                               .where(ExplorationRow.id == exploration_id))
+        if group is None:
+            return [exploration_id]
+        return list(session.scalars(select(ExplorationRow.id).where(
+            ExplorationRow.support_group == group).order_by(ExplorationRow.id)))
+
+
+def _explore_one(opts: ExploreOptions, sessions: sessionmaker[Session], settings: Settings,
+                 endpoint: str, exploration_id: int, how: str, retried: int) -> int:
+    """Drive one exploration to its end and report it; the command's exit status for it."""
     say = (lambda *a: None) if opts.quiet else (lambda msg: print(msg, file=sys.stderr))
+    data_dir = settings.database.data_dir
+    with sessions() as session:
+        total = session.get(ExplorationRow, exploration_id).poses_total
     if how == "done":
         say(f"exploration {exploration_id} of {opts.object} with {opts.gripper} is done: its "
             "stored results (--new explores again)")
@@ -343,8 +379,5 @@ def run_explore(opts: ExploreOptions) -> int:
                    and _drive(opts, sessions, settings, endpoint, exploration_id))
     elapsed = time.monotonic() - started
     say("")
-    try:
-        status = _report(sessions, data_dir, exploration_id, interrupted, elapsed)
-    finally:
-        engine.dispose()
+    status = _report(sessions, data_dir, exploration_id, interrupted, elapsed)
     return EXIT_INTERRUPTED if interrupted else exit_status(status)

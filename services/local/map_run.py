@@ -32,6 +32,7 @@ def register_run(map_actions: Any) -> None:
     cli_args.add_grid(run, dtheta=RUN_DTHETA_DEG, r=RUN_R, levels=1)
     run.add_argument("--normal-reuse", action="store_true",
                      help="shortcut 1: reuse a normal's results across its start gaps")
+    cli_args.add_support(run)
     cli_args.add_procs(run, "simulation processes (default 1)")
     cli_args.add_hidden_alias(run, "--processes", "procs", type=int)
     cli_args.add_store(run, data_dir_default="a new temporary folder", url=False)
@@ -45,14 +46,12 @@ def register_run(map_actions: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from graspscape.services.coordinator.exploration.service import create_exploration
-    from graspscape.services.coordinator.manifolds.service import stored_manifolds
-    from graspscape.services.coordinator.manifolds.summary import table_rows_of
-    from graspscape.services.coordinator.maps.cli import write_picture
+    from graspscape.services.coordinator.exploration.service import create_explorations
     from graspscape.services.local.compose import open_store, store_object
     from graspscape.services.local.run import pybullet_evaluator, run_local
     from graspscape.shared.specs.exploration import ExplorationSpec
     from graspscape.shared.specs.objects import ObjectSpec
+    from graspscape.shared.specs.sim import SimSettings
 
     if args.db is not None:  # the earlier --db FILE
         path = args.db
@@ -73,22 +72,45 @@ def _run(args: argparse.Namespace) -> int:
                   "attitudes": {"rolls": args.rolls or 1}},
             refinement={"levels": 1 if args.levels is None else args.levels},
             shortcuts={"normal_reuse": args.normal_reuse},
+            support={"kind": args.support or "none",
+                     **({} if args.support_friction is None
+                        else {"friction": args.support_friction})},
         )
-        exploration_id = create_exploration(session, spec=spec, tile_target_poses=50,
-                                            max_poses=10**7).id
+        rows = create_explorations(session, spec=spec, tile_target_poses=50, max_poses=10**7)
+        tables = {row.id: ExplorationSpec.model_validate(row.spec).settings.table
+                  for row in rows}
     procs = args.procs or 1
     pool = ProcessPoolExecutor(procs) if procs > 1 else None
+    obj = ObjectSpec(name=args.object)
     try:
-        stats = run_local(sessions, pybullet_evaluator(ObjectSpec(name=args.object),
-                                                       gripper, pool=pool))
+        # On a table each exploration simulates its own resting pose.
+        evaluators = {i: pybullet_evaluator(obj, gripper, SimSettings(table=table), pool=pool)
+                      for i, table in tables.items() if table is not None}
+        stats = run_local(sessions, pybullet_evaluator(obj, gripper, pool=pool),
+                          evaluators=evaluators)
     finally:
         if pool is not None:
             pool.shutdown()
     print(f"{stats.evaluated} poses evaluated in {stats.wall_s:.0f} s ({path})", file=sys.stderr)
-    write_picture(sessions, exploration_id, args)
+    for k, exploration_id in enumerate(tables):
+        write_outputs(sessions, exploration_id, args, f"-rest{k}" if len(tables) > 1 else "")
+    engine.dispose()
+    return 0
+
+
+def write_outputs(sessions, exploration_id: int, args: argparse.Namespace, tag: str) -> None:
+    """The map picture (and the manifold table where asked) of one exploration; `tag` goes
+    before the suffix of each file name (one exploration per resting pose on a table)."""
+    from graspscape.services.coordinator.manifolds.service import stored_manifolds
+    from graspscape.services.coordinator.manifolds.summary import table_rows_of
+    from graspscape.services.coordinator.maps.cli import write_picture
+
+    def tagged(path: Path) -> Path:
+        return path.with_name(f"{path.stem}{tag}{path.suffix}")
+
+    write_picture(sessions, exploration_id, argparse.Namespace(**{**vars(args),
+                                                                  "out": tagged(args.out)}))
     if args.table is not None:
         with sessions() as session:
             items = stored_manifolds(session, exploration_id)
-        args.table.write_text(json.dumps(table_rows_of(items), indent=2))
-    engine.dispose()
-    return 0
+        tagged(args.table).write_text(json.dumps(table_rows_of(items), indent=2))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import random
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 
@@ -109,9 +109,13 @@ def run_local(
     seed: int = 0,
     split: int = 1,
     max_tiles: int = 100_000,
+    evaluators: Mapping[int, Evaluate] | None = None,
 ) -> RunStats:
     """Drive every queued tile to done. `split` > 1 sends each tile's results in that many
-    batches (the last one final); batches of all leased tiles are shuffled by `seed`."""
+    batches (the last one final); batches of all leased tiles are shuffled by `seed`.
+    `evaluators`: an exploration's own evaluation, by id, where its settings differ (a table
+    at each resting pose); the others use `evaluate`."""
+    evaluators = evaluators or {}
     wire()
     rng = random.Random(seed)
     stats = RunStats()
@@ -132,7 +136,8 @@ def run_local(
         batches = []
         for worker, tile in leased:
             t0 = time.perf_counter()
-            results = evaluate(tile.poses(), matches.get(tile.exploration_id))
+            results = evaluators.get(tile.exploration_id, evaluate)(
+                tile.poses(), matches.get(tile.exploration_id))
             stats.eval_s += time.perf_counter() - t0
             stats.evaluated += len(results)
             order = list(results)
