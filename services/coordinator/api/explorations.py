@@ -15,7 +15,7 @@ from graspscape.services.coordinator.api.responses import (
     error,
     json_response,
 )
-from graspscape.services.coordinator.exploration import service
+from graspscape.services.coordinator.exploration import service, support
 from graspscape.services.coordinator.exploration.schemas import (
     ExplorationCreated,
     ExplorationDetail,
@@ -94,6 +94,17 @@ def get_exploration(exploration_id: Id, session: SessionDep, settings: SettingsD
         {**ExplorationOut.model_validate(row).model_dump(), "progress": progress,
          "failures": failures}
     )
+
+
+@router.get(
+    "/explorations/{exploration_id}/group",
+    response_model=list[ExplorationOut],
+    responses=_NOT_FOUND,
+    summary="On a table: every exploration submitted with this one, one per resting pose, "
+    "most probable first (a free object's: itself alone)",
+)
+def get_group(exploration_id: Id, session: SessionDep) -> Any:
+    return support.group_rows(session, exploration_id)
 
 
 @router.get(

@@ -20,6 +20,7 @@ from graspscape.services.coordinator.api.responses import encoded, error
 from graspscape.services.coordinator.api.streams import ClosingStream
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.schemas import PoseOut
+from graspscape.services.coordinator.exploration.support import at_resting_pose
 from graspscape.services.coordinator.manifolds import best as ranking
 from graspscape.services.coordinator.manifolds import export, p_success
 from graspscape.services.coordinator.manifolds import service as manifolds
@@ -206,7 +207,14 @@ def best(
         ge=0.0, le=180.0, allow_inf_nan=False,
         description="the robot's angular error, °: beyond one finest angular step, δ is two "
         "steps")] = None,
+    resting: Annotated[int | None, Query(
+        ge=0, le=1000,
+        description="on a table: the best of the exploration of this one's group at resting "
+        "pose `resting` (0: the most probable; GET /explorations/{id}/group lists them)",
+    )] = None,
 ) -> Any:
+    if resting is not None:
+        exploration_id = at_resting_pose(session, exploration_id, resting)
     axis_given = [c is not None for c in (cone_x, cone_y, cone_z)]
     axis = None
     if any(axis_given):

@@ -52,3 +52,18 @@ def test_a_plane_on_mujoco_is_refused_naming_the_engine(client, object_id):
     refused = client.post("/explorations", json=spec)
     assert refused.status_code == 422
     assert "pybullet" in refused.text
+
+
+def test_best_and_the_group_route_select_a_resting_pose(client, named_object):
+    cube = named_object("cube")
+    created = client.post("/explorations", json={"object_id": cube, "grid": COARSE,
+                                                 "support": {"kind": "plane"}}).json()
+    group = client.get(f"/explorations/{created['group'][-1]}/group").json()
+    assert [g["id"] for g in group] == created["group"]
+    assert [g["resting_index"] for g in group] == list(range(len(group)))
+    last = len(group) - 1
+    best = client.get(f"/explorations/{created['id']}/best", params={"resting": last})
+    assert best.status_code == 200, best.text
+    assert best.json()["exploration_id"] == group[last]["id"]
+    missing = client.get(f"/explorations/{created['id']}/best", params={"resting": 99})
+    assert missing.status_code == 404 and "group" in missing.text
