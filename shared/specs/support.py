@@ -101,6 +101,19 @@ class SupportSpec(BaseModel):
         "its resting pose")
 
 
+def resting_document(spec_json: dict) -> dict | None:
+    """What an export states about the table, from a stored spec's JSON: the resting pose
+    (the object frame in the table frame, 4×4, and as position + quaternion), its rank and
+    probability, and the table's friction; None for a free object."""
+    support = SupportSpec.model_validate(spec_json.get("support") or {})
+    if support.resting is None:
+        return None
+    resting = support.resting
+    return {"object_in_table": resting.matrix(), "position": list(resting.position),
+            "quaternion_xyzw": list(resting.quaternion), "index": resting.index,
+            "probability": resting.probability, "friction": support.friction}
+
+
 def table_scene(support: SupportSpec) -> TableScene | None:
     """The table the workers simulate for a support with its resting pose set."""
     if support.kind != "plane" or support.resting is None:

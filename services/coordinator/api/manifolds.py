@@ -35,7 +35,7 @@ from graspscape.services.coordinator.manifolds.table import (
     table_document,
 )
 from graspscape.services.coordinator.maps.stored import draw_finished_maps_ahead
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 router = APIRouter(tags=["manifolds"], route_class=FiniteJSONRoute)
 # The coordinator draws a finished map's default picture ahead, so that map.png's first read
@@ -69,6 +69,11 @@ class ManifoldList(BaseModel):
 
 
 class ManifoldTable(ManifoldList):
+    """On a table, also `resting_pose`: the object frame in the table frame (4×4 and
+    position + quaternion), the pose's rank and probability, the table's friction."""
+
+    model_config = ConfigDict(extra="allow")
+
     table: list[dict[str, Any]] = Field(description="one short row per large manifold (the "
                                         "docs' table: label, description, poses, volume, core "
                                         "volume, μs, best and robust best), then the dust as "

@@ -70,6 +70,11 @@ def write_acronym(session: Session, exploration_id: int, out: BinaryIO,
         if mesh is not None:
             file["object/mesh/vertices"] = np.asarray(mesh.vertices, dtype=float)
             file["object/mesh/faces"] = np.asarray(mesh.faces, dtype=np.int64)
+        if source.resting_pose is not None:  # on a table: the object frame in the table's
+            table = source.resting_pose
+            file["table/object_in_table"] = np.asarray(table["object_in_table"], dtype=float)
+            file["table/probability"] = table["probability"]
+            file["table/friction"] = table["friction"]
         file["gripper/type"] = source.gripper
         file["gripper/name"] = source.gripper
         datasets = {name: file.create_dataset(name, shape=(0, *shape), dtype=dtype,

@@ -34,6 +34,8 @@ def write_graspgen(session: Session, exploration_id: int, out: BinaryIO,
                    "mass": source.object.mass_kg},
         "gripper": {"name": source.gripper},
     }
+    if source.resting_pose is not None:  # on a table: where the object rests
+        head["table"] = source.resting_pose
     out.write(json.dumps(head)[:-1].encode() + b', "grasps": {"transforms": [')
     success, from_grasp = bytearray(), bytearray()
     lower: list[float | None] = []

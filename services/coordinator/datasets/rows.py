@@ -19,6 +19,7 @@ from graspscape.services.coordinator.store.models import (
     PoseRow,
 )
 from graspscape.shared.specs.objects import METRES_PER
+from graspscape.shared.specs.support import resting_document
 from pydantic import BaseModel, Field
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -50,6 +51,7 @@ class DatasetSource(BaseModel):
     exploration_id: int
     object: DatasetObject
     gripper: str
+    resting_pose: dict[str, Any] | None = None  # on a table: support.resting_document
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,7 @@ def dataset_source(session: Session, exploration_id: int,
             source_scale=float(props.get("scale", 1.0)) * METRES_PER[props.get("units") or "m"],
             mass_kg=props.get("mass_kg"), friction=props.get("friction")),
         gripper=str(row.spec["gripper"]),
+        resting_pose=resting_document(row.spec),
     )
 
 

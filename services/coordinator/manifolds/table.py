@@ -14,6 +14,8 @@ from graspscape.services.coordinator.manifolds.grouping import label_name
 from graspscape.services.coordinator.manifolds.p_success import SuccessOut
 from graspscape.services.coordinator.manifolds.service import is_final, stored_manifolds
 from graspscape.services.coordinator.manifolds.summary import dust_line, table_rows_of
+from graspscape.services.coordinator.store.models import ExplorationRow
+from graspscape.shared.specs.support import resting_document
 from pydantic import BaseModel, Field
 from sqlalchemy.orm import Session
 
@@ -63,4 +65,13 @@ def table_document(session: Session, exploration_id: int) -> dict[str, Any]:
             "manifolds": [m.model_dump(mode="json") for m in items],
             "dust": dust_line(items),
             "success": {k: v.model_dump(mode="json") for k, v in success.items()},
-            "table": _with_success(table_rows_of(items), success)}
+            "table": _with_success(table_rows_of(items), success),
+            **_resting(session, exploration_id)}
+
+
+def _resting(session: Session, exploration_id: int) -> dict[str, Any]:
+    """On a table, `resting_pose` (support.resting_document); nothing for a free object, so
+    its table reads as it always did."""
+    row = session.get(ExplorationRow, exploration_id)
+    found = None if row is None else resting_document(row.spec)
+    return {} if found is None else {"resting_pose": found}

@@ -4,6 +4,7 @@ storing its resting pose; the workers are told the table through the settings.""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from graspscape.services.coordinator.dispatch.catalog import WorkContexts
 from graspscape.services.coordinator.store.models import ExplorationRow
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -67,3 +68,22 @@ def test_best_and_the_group_route_select_a_resting_pose(client, named_object):
     assert best.json()["exploration_id"] == group[last]["id"]
     missing = client.get(f"/explorations/{created['id']}/best", params={"resting": 99})
     assert missing.status_code == 404 and "group" in missing.text
+
+
+def test_exports_state_the_resting_pose(client, named_object):
+    cube = named_object("cube")
+    created = client.post("/explorations", json={"object_id": cube, "grid": COARSE,
+                                                 "support": {"kind": "plane"}}).json()
+    second = created["group"][1]
+    table = client.get(f"/explorations/{second}/export/manifolds.json").json()
+    resting = table["resting_pose"]
+    assert resting["index"] == 1 and resting["friction"] == 0.5
+    matrix = np.array(resting["object_in_table"])
+    # A cube face down: the centre of mass 3 cm over the table, the axes a rotation.
+    assert matrix[2, 3] == pytest.approx(0.03, abs=1e-6)
+    assert np.allclose(matrix[:3, :3] @ matrix[:3, :3].T, np.eye(3), atol=1e-9)
+    graspgen = client.get(f"/explorations/{second}/export/graspgen.json").json()
+    assert graspgen["table"] == resting
+    free = client.post("/explorations", json={"object_id": cube, "grid": COARSE}).json()
+    assert "resting_pose" not in client.get(
+        f"/explorations/{free['id']}/export/manifolds.json").json()
