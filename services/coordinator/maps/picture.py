@@ -119,11 +119,18 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
                                             version_text(row))
             data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),
                               cut=cut, phi0=math.radians(phi0_deg), attitude=attitude,
-                              fmt=fmt, title=title, r_level=r_level, panel_key=version)
+                              fmt=fmt, title=title, r_level=r_level, panel_key=version,
+                              table=table_of(spec))
             return _keep(key, (data, len(manifolds), len(points)))
         finally:
             with _lock:
                 _drawing.pop(key, None)
+
+
+def table_of(spec: Any) -> tuple[Any, float] | None:
+    """On a table: (its up in the object frame, the centre of mass's height over it)."""
+    resting = spec.support.resting
+    return None if resting is None else (resting.up(), float(resting.position[2]))
 
 
 DRAW_AHEAD_WAIT_S = 60.0

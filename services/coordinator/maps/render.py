@@ -228,6 +228,42 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
     ax.set_xlabel("m")
 
 
+# On a table: (the table's up in the object frame, the centre of mass's height over it, m).
+Table = tuple[np.ndarray, float]
+
+
+def _table_in_cut(ax: Any, field: dict[str, Any], table: Table) -> None:
+    """The table's trace in the cut (a line, the side under it shaded), where the cut is not
+    parallel to it."""
+    up, height = table
+    a, b = float(up @ field["e1"]), float(up @ field["e2"])
+    norm = math.hypot(a, b)
+    if norm < 1e-6:
+        return
+    X, Y = field["X"], field["Y"]
+    reach = 2.0 * float(max(np.abs(X).max(), np.abs(Y).max()))
+    normal = np.array([a, b]) / norm
+    on = -height / norm * normal  # the nearest point of the trace to the centre of mass
+    along = np.array([-normal[1], normal[0]]) * reach
+    below = on - normal * reach
+    ax.fill(*np.array([on - along, on + along, below + along, below - along]).T,
+            color="0.45", alpha=0.35, zorder=3, linewidth=0)
+    ax.plot(*np.array([on - along, on + along]).T, color="0.25", linewidth=1.4, zorder=4)
+    ax.set_xlim(float(X.min()), float(X.max()))
+    ax.set_ylim(float(Y.min()), float(Y.max()))
+
+
+def _table_in_3d(ax: Any, table: Table, size: float) -> None:
+    """The table as a translucent square under the object in the 3D view."""
+    up, height = table
+    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    s, t = np.meshgrid([-size, size], [-size, size])
+    corner = -height * up[:, None, None] + e1[:, None, None] * s + e2[:, None, None] * t
+    ax.plot_surface(*corner, color="0.45", alpha=0.3, linewidth=0)
+
+
 def _draw_3d(ax: Any, lattice: Lattice, points: MapPoints, mesh: Any | None) -> None:
     pos, colours = derived.markers(lattice, points, mesh, _COLOURS)
     if len(pos):
@@ -254,15 +290,17 @@ def render_map(
     pixels: int = PIXELS,
     r_level: float | None = None,
     panel_key: Hashable | None = None,
+    table: Table | None = None,
 ) -> bytes:
     """The picture; `panel_key`: the map version, under which a PNG's 3D view is kept and put
-    back in later renders of that version where that is exact (maps/panel.py)."""
+    back in later renders of that version where that is exact (maps/panel.py); `table`: on a
+    table, drawn in both views."""
     field = cut_field(lattice, points, mesh, cut=cut, phi0=phi0,
                       attitude=attitude, pixels=pixels, r_level=r_level)
     with _drawing:
         return _figure(field, lattice, points, manifolds, mesh, cut=cut, phi0=phi0,
                        attitude=attitude, fmt=fmt, title=title, r_level=r_level,
-                       panel_key=panel_key)
+                       panel_key=panel_key, table=table)
 
 
 # One figure at a time per process: pyplot's figure registry and mathtext's parser are not
@@ -273,7 +311,7 @@ _drawing = threading.Lock()
 def _figure(field: dict[str, Any], lattice: Lattice, points: MapPoints,
             manifolds: list[ManifoldSummary], mesh: Any | None, *, cut: Cut, phi0: float,
             attitude: int, fmt: Literal["png", "svg"], title: str, r_level: float | None,
-            panel_key: Hashable | None) -> bytes:
+            panel_key: Hashable | None, table: Table | None = None) -> bytes:
     fig = plt.figure(figsize=(12, 5.6))
     ax = fig.add_subplot(1, 2, 1)
     roll = lattice.attitudes[attitude][0]
@@ -284,6 +322,9 @@ def _figure(field: dict[str, Any], lattice: Lattice, points: MapPoints,
               f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     _draw_3d(ax3, lattice, points, mesh)
+    if table is not None:
+        _table_in_cut(ax, field, table)
+        _table_in_3d(ax3, table, float(np.abs(field["X"]).max()))
     if panel_key is not None and fmt == "png":
         reuse_panel(ax, ax3, panel_key)
     large = [m for m in manifolds if m.large]
