@@ -31,6 +31,7 @@ from graspscape.shared.specs.results import (
 )
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.workers.sim import table as on_table
 from graspscape.workers.sim.bullet import (
     max_abs_motor_torque,
     remove_state,
@@ -55,7 +56,6 @@ from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, r
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
 from graspscape.workers.sim.start_pose import StartPose, place_hand, start_pose
-from graspscape.workers.sim.table import TableWatch, add_table, hand_in_table, lift_off
 from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
 
 FIXTURE_MAX_FORCE_N = 5000.0
@@ -95,9 +95,7 @@ class Evaluator:
                            drive_constraint=drive, fixture_constraint=fixture, offset=offset,
                            dt=physics.dt)
         if table is not None:
-            self.scene.table_body = add_table(cid, table, offset, prepared.friction)
-            self.scene.rest_rotation = table.resting.rotation()
-            self.scene.watch = TableWatch(table, self.scene.object_pose())
+            on_table.set_table(self.scene, table, prepared.friction)
         inertia = np.array(prepared.inertia_diag, dtype=float)
         metric = self.settings.metric
         if metric.characteristic_length == "radius_of_gyration":
@@ -173,14 +171,12 @@ class Evaluator:
             return self._finish(started, Outcome.INFEASIBLE, result), None
         position, rotation, target, gap = start
         result["effective_r"] = gap
-        table = self.settings.table
-        if table is not None and hand_in_table(self.scene):
-            return self._finish(started, Outcome.INFEASIBLE_TABLE, result), None
+        if (blocked := on_table.start_outcome(self.scene)) is not None:
+            return self._finish(started, blocked, result), None
 
         outcome = self.policy.synthesize(self.scene, position, rotation, target,
                                          self.settings, phases)
-        if table is not None and self.scene.watch.knocked:
-            outcome = Outcome.KNOCKED
+        outcome = on_table.closing_outcome(self.scene) or outcome
         if outcome is not None:
             return self._finish(started, outcome, result), None
 
@@ -244,7 +240,7 @@ class Evaluator:
         p.setGravity(0, 0, -spec.gravity_m_s2, physicsClientId=cid)
         scene.object_weight_n = 0.0  # gravity is global from here on
         if self.settings.table is not None:
-            lift_off(scene, self.settings.table, phases)
+            on_table.lift_off(scene, self.settings.table, phases)
         start_pos, start_rot = hand.frame_pose()
         dt = scene.dt
         scene.drive_to(start_pos, start_rot)

@@ -16,6 +16,7 @@ import pybullet as p
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.workers.sim.bullet import get_dynamics_info
+from graspscape.workers.sim.table import closing_outcome, start_outcome
 
 
 @dataclass(frozen=True)
@@ -50,13 +51,18 @@ def sample(evaluator, pose: Pose, *, friction_scale: float = 1.0, mass_scale: fl
                              mass=mass * mass_scale,
                              localInertiaDiagonal=[x * mass_scale for x in inertia],
                              physicsClientId=cid)
+            # On a table the object's weight is applied as a force (table.py): scaled too.
+            scene.object_weight_n = getattr(scene, "object_weight_n", 0.0) * mass_scale
         start = evaluator._start_pose(pose)
         if start is None:
             return Sample(Outcome.INFEASIBLE, (), time.perf_counter() - started)
+        if (blocked := start_outcome(scene)) is not None:
+            return Sample(blocked, (), time.perf_counter() - started)
         position, rotation, target, _ = start
         phases = PhaseTimes()
         failed = evaluator.policy.synthesize(scene, position, rotation, target,
                                              evaluator.settings, phases)
+        failed = closing_outcome(scene) or failed
         if failed is not None:
             return Sample(failed, (), time.perf_counter() - started)
         links = tuple(sorted({scene.hand.link_names[c.link_index_a]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pybullet as p
-from graspscape.shared.specs.results import PhaseTimes
+from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.shared.specs.support import TableScene
 from graspscape.workers.sim.bullet import get_closest_points
 from graspscape.workers.sim.trajectory import min_jerk, rotation_angle
@@ -38,6 +38,25 @@ def add_table(client: int, table: TableScene, offset: np.ndarray, object_frictio
     p.changeDynamics(body, -1, lateralFriction=table.friction / max(object_friction, 1e-6),
                      physicsClientId=client)
     return body
+
+
+def set_table(scene, table: TableScene, object_friction: float) -> None:
+    """Puts the table under the scene's object, at rest at its resting pose, and its watch."""
+    scene.table_body = add_table(scene.client, table, scene.offset, object_friction)
+    scene.rest_rotation = table.resting.rotation()
+    scene.watch = TableWatch(table, scene.object_pose())
+
+
+def start_outcome(scene) -> Outcome | None:
+    """`infeasible_table` where the hand placed at its start reaches into the table."""
+    if scene.table_body is not None and hand_in_table(scene):
+        return Outcome.INFEASIBLE_TABLE
+    return None
+
+
+def closing_outcome(scene) -> Outcome | None:
+    """`knocked` where the watch saw the hand tip or drag the object before lift-off."""
+    return Outcome.KNOCKED if scene.watch is not None and scene.watch.knocked else None
 
 
 def hand_in_table(scene) -> bool:

@@ -98,3 +98,16 @@ def test_resting_poses_of_the_cube_and_the_sphere():
                                   min_probability=0.05, max_poses=4)
     assert len(sphere) == 1 and sphere[0].probability == pytest.approx(1.0)
     assert np.linalg.norm(sphere[0].up()) == pytest.approx(1.0)
+
+
+def test_a_draw_of_p_success_on_the_table_tells_the_same(tmp_path):
+    # The outcome-only draws of the certification race meet the same table.
+    from graspscape.workers.sim.evaluate import _evaluator
+    from graspscape.workers.sim.samples import sample
+
+    sphere = ObjectSpec(name="sphere")
+    evaluator = _evaluator(sphere, "robotiq_3f", _on_table(0.0398), tmp_path)
+    below = sample(evaluator, Pose(theta=math.pi, phi=0.0, r=0.03))
+    assert below.outcome is Outcome.INFEASIBLE_TABLE
+    above = sample(evaluator, Pose(theta=0.0, phi=0.0, r=0.06), mass_scale=1.2)
+    assert above.held
