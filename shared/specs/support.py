@@ -102,6 +102,12 @@ class SupportSpec(BaseModel):
     resting: RestingPose | None = Field(
         default=None, description="set by the coordinator on each exploration of the group: "
         "its resting pose")
+    seed_exploration: int | None = Field(
+        default=None, ge=1, le=2**31 - 1,
+        description="a free-object exploration of the same object, gripper, grid and "
+        "refinement levels: each exploration on the table evaluates only its viable poses, "
+        "once (starts whose palm is under the table are skipped; the rest are simulated "
+        "again on the table, not copied); None: the whole grid as the strategy plans it")
 
 
 def resting_document(spec_json: dict) -> dict | None:
@@ -129,6 +135,8 @@ def support_problem(support: SupportSpec, table: TableScene | None, engine: str)
     if support.kind == "plane" and engine != "pybullet":
         return ("support 'plane' is simulated on pybullet only; set settings.engine to "
                 "'pybullet' or support.kind to 'none'")
+    if support.seed_exploration is not None and support.kind != "plane":
+        return "support.seed_exploration needs support.kind 'plane'"
     if support.resting is None:
         if table is not None:
             return ("settings.table is set by the coordinator from support; submit "

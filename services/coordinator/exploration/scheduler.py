@@ -48,7 +48,9 @@ def initial_tiles(session: Session, spec: ExplorationSpec, *, target_poses: int
     """What a submission starts with: the poses its strategy plans in all (for progress)
     and its first tiles."""
     strategy = strategy_for(spec)
-    return strategy.planned_poses(), strategy.initial_work(session, target_poses=target_poses)
+    # The work first: a strategy may count its poses as it plans them (strategies/seeded.py).
+    work = strategy.initial_work(session, target_poses=target_poses)
+    return strategy.planned_poses(), work
 
 
 def ingest_results(

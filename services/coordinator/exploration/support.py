@@ -7,9 +7,12 @@ refuses a plane rather than guess."""
 from __future__ import annotations
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound
+from graspscape.services.coordinator.exploration.object_symmetry import resolve_grid
 from graspscape.services.coordinator.objects.geometry import MESH_QUERIES, object_mesh
-from graspscape.services.coordinator.store.models import ExplorationRow
+from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec
+from graspscape.shared.specs.placement import place_gripper
+from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.resting import chosen_resting_poses
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -57,3 +60,38 @@ def at_resting_pose(session: Session, exploration_id: int, resting: int) -> int:
             return row.id
     raise NotFound(f"exploration {exploration_id} has no resting pose {resting} in its group "
                    "(GET /explorations/{id}/group lists them)")
+
+
+def seed_poses(session: Session, spec: ExplorationSpec) -> list[Pose]:
+    """The viable poses of `spec.support.seed_exploration` that the table at `spec`'s resting
+    pose leaves: those whose palm centre is not under the table (module doc of
+    strategies/seeded.py). Refused (InvalidInput) where the seed is not a free-object map of
+    the same object, gripper, grid and lattice depth."""
+    seed_id, resting = spec.support.seed_exploration, spec.support.resting
+    assert seed_id is not None and resting is not None
+    seed = session.get(ExplorationRow, seed_id)
+    if seed is None:
+        raise InvalidInput(f"seed exploration {seed_id} does not exist",
+                           loc=("body", "support", "seed_exploration"))
+    seed_spec = resolve_grid(session, ExplorationSpec.model_validate(seed.spec))
+    mine = resolve_grid(session, spec)
+    same = (seed_spec.object_id == mine.object_id and seed_spec.gripper == mine.gripper
+            and seed_spec.grid == mine.grid
+            and seed_spec.refinement.levels == mine.refinement.levels
+            and seed_spec.support.kind == "none")
+    if not same:
+        raise InvalidInput(
+            f"seed exploration {seed_id} is not a free-object map of this object with the same "
+            "gripper, grid and refinement levels", loc=("body", "support", "seed_exploration"))
+    rows = session.execute(select(PoseRow.theta, PoseRow.phi, PoseRow.r, PoseRow.roll,
+                                  PoseRow.pitch, PoseRow.yaw)
+                           .where(PoseRow.exploration_id == seed_id, PoseRow.viable)).all()
+    poses = {p.key(): p for p in (Pose(theta=t, phi=f, r=r, roll=a, pitch=b, yaw=c)
+                                  for t, f, r, a, b, c in rows)}
+    mesh = object_mesh(session, spec.object_id)
+    if mesh is None:
+        return sorted(poses.values(), key=lambda p: p.key())
+    up, height = resting.up(), resting.position[2]
+    with MESH_QUERIES:
+        return [p for _, p in sorted(poses.items())
+                if float(up @ place_gripper(mesh, p).position) > -height]

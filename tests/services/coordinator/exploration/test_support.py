@@ -87,3 +87,55 @@ def test_exports_state_the_resting_pose(client, named_object):
     free = client.post("/explorations", json={"object_id": cube, "grid": COARSE}).json()
     assert "resting_pose" not in client.get(
         f"/explorations/{free['id']}/export/manifolds.json").json()
+
+
+def test_a_free_map_seeds_the_table_with_its_viable_poses_not_under_it(
+        client, named_object, sessions):
+    from graspscape.services.coordinator.exploration.scheduler import ingest_results
+    from graspscape.services.coordinator.store.models import PoseRow
+    from graspscape.services.coordinator.store.queue import lease_tiles
+    from graspscape.shared.specs.placement import place_gripper
+    from graspscape.shared.specs.pose import Pose
+    from sqlalchemy import select
+
+    from tests.factories import oracle_result
+
+    cube = named_object("cube")
+    grid = {"dtheta": 0.8, "r_min": 0.02, "r_max": 0.02}
+    free = client.post("/explorations", json={"object_id": cube, "grid": grid}).json()["id"]
+    with sessions() as s:  # the free map, made up
+        while tiles := lease_tiles(s, worker_id="w", n=8, lease_seconds=60):
+            for tile in tiles:
+                ingest_results(s, tile_id=tile.tile_id, lease_epoch=tile.lease_epoch,
+                               worker_id="w", results=[oracle_result(p) for p in tile.poses()],
+                               keeper=None)
+        seed_keys = set(s.scalars(select(PoseRow.pose_key).where(
+            PoseRow.exploration_id == free, PoseRow.viable)))
+    created = client.post("/explorations", json={
+        "object_id": cube, "grid": grid,
+        "support": {"kind": "plane", "seed_exploration": free}}).json()
+    first = client.get(f"/explorations/{created['id']}").json()
+    spec = ExplorationSpec.model_validate(first["spec"])
+    assert 0 < first["poses_total"] < len(seed_keys)
+    mesh = prepare_cube_mesh()
+    up, height = spec.support.resting.up(), spec.support.resting.position[2]
+    with sessions() as s:
+        planned = {key for tile in lease_tiles(s, worker_id="v", n=1000, lease_seconds=60)
+                   if tile.exploration_id == created["id"] for key in
+                   (p.key() for p in tile.poses())}
+    assert planned and planned <= seed_keys
+    for key in seed_keys - planned:  # skipped: the palm under the table
+        theta, phi, r, roll, pitch, yaw = (float(x) for x in key.split("/"))
+        pose = Pose(theta=theta, phi=phi, r=r, roll=roll, pitch=pitch, yaw=yaw)
+        assert up @ place_gripper(mesh, pose).position <= -height
+    wrong = client.post("/explorations", json={
+        "object_id": cube, "grid": {**grid, "dtheta": 0.7},
+        "support": {"kind": "plane", "seed_exploration": free}})
+    assert wrong.status_code == 422 and "seed exploration" in wrong.text
+
+
+def prepare_cube_mesh():
+    from graspscape.services.coordinator.objects.geometry import spec_mesh
+    from graspscape.shared.specs.objects import ObjectSpec
+
+    return spec_mesh(ObjectSpec(name="cube"))
