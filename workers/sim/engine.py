@@ -66,6 +66,9 @@ def available_engines() -> tuple[str, ...]:
 def make_evaluator(prepared: PreparedObject, gripper: AnyGripperSpec, settings: SimSettings,
                    *, work_dir: Path):
     if settings.engine == "mujoco":
+        if settings.table is not None:
+            raise ValueError("a table (support 'plane') is simulated on pybullet only; "
+                             "set the engine to pybullet")
         from graspscape.workers.sim.mj.evaluate import MjEvaluator
 
         return MjEvaluator(prepared, gripper, settings, work_dir=work_dir)
