@@ -68,6 +68,7 @@ class Submitted(_Answer):
     status: str
     tiles_total: int
     poses_total: int
+    group: list[int] = Field(default_factory=list)  # on a table: one id per resting pose
 
 
 class Retried(_Answer):
