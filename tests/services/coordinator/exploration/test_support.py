@@ -139,3 +139,25 @@ def prepare_cube_mesh():
     from graspscape.shared.specs.objects import ObjectSpec
 
     return spec_mesh(ObjectSpec(name="cube"))
+
+
+def test_the_map_picture_draws_the_table(client, named_object, sessions):
+    import matplotlib.pyplot as plt
+    from graspscape.services.coordinator.maps.render import _table_in_cut
+
+    mug = named_object("mug")
+    created = client.post("/explorations", json={"object_id": mug, "grid": COARSE,
+                                                 "support": {"kind": "plane"}}).json()
+    with_table = client.get(f"/explorations/{created['id']}/map.png",
+                            params={"cut": "vertical"})
+    assert with_table.status_code == 200
+    assert with_table.content[:8] == b"\x89PNG\r\n\x1a\n"
+    # The trace: a line at the table's height under the centre of mass, in the cut's plane.
+    fig, ax = plt.subplots()
+    grid = np.linspace(-0.1, 0.1, 5)
+    field = {"X": np.tile(grid, (5, 1)), "Y": np.tile(grid, (5, 1)).T,
+             "e1": np.array([1.0, 0.0, 0.0]), "e2": np.array([0.0, 0.0, 1.0])}
+    _table_in_cut(ax, field, (np.array([0.0, 0.0, 1.0]), 0.04))
+    (line,) = ax.lines
+    assert np.allclose(line.get_ydata(), -0.04)
+    plt.close(fig)
