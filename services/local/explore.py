@@ -119,7 +119,9 @@ def _exploration(session: Session, spec: ExplorationSpec, settings: Settings,
         .order_by(ExplorationRow.status != ExplorationStatus.DONE,
                   ExplorationRow.status.in_(_RETRYABLE), ExplorationRow.id.desc())
     ):
-        if row.spec == wanted:
+        # Read as a spec: a row stored before a field was added (support) reads with its
+        # default, and is the same exploration.
+        if row.spec == wanted or _as_spec(row.spec) == wanted:
             if row.status == ExplorationStatus.DONE:
                 return row.id, "done", 0
             retried = 0
@@ -129,6 +131,13 @@ def _exploration(session: Session, spec: ExplorationSpec, settings: Settings,
     row = create_exploration(session, spec=spec, tile_target_poses=settings.queue.tile_target_poses,
                              max_poses=settings.queue.max_poses_per_exploration)
     return row.id, "exploration", 0
+
+
+def _as_spec(stored: dict) -> dict | None:
+    try:
+        return ExplorationSpec.model_validate(stored).model_dump(mode="json")
+    except ValueError:  # a spec this version no longer reads is not the one asked for
+        return None
 
 
 def outcome_line(session: Session, exploration_id: int, stored: int, elapsed_s: float) -> str:

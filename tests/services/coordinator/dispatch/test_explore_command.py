@@ -73,3 +73,27 @@ def test_explore_with_a_gripper_of_ones_own(tmp_path: Path):
     with sqlite3.connect(tmp_path / "d" / "coordinator.db") as db:
         (spec,) = db.execute("select spec from explorations").fetchone()
     assert json.loads(spec)["gripper"] == str(own)
+
+
+@pytest.mark.slow
+def test_explore_on_a_table_drives_one_exploration_per_resting_pose(tmp_path: Path):
+    # A cube rests on any of its six faces alike: four resting poses, at most four.
+    command = [sys.executable, "-m", "graspscape.services.local.cli", "explore", "cube",
+               "--support", "plane", "--dtheta", "90", "--r-min", "0.08", "--r-max", "0.08",
+               "--levels", "0", "--robustness", "none", "--procs", "1",
+               "--data-dir", str(tmp_path), "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=400)
+    assert run.returncode == 0, run.stderr
+    ids = [int(i) for i in re.findall(r"\(exploration (\d+)\)", run.stdout)]
+    assert len(ids) == 4 and ids == sorted(set(ids))
+    assert len(re.findall(r"^done: ", run.stdout, re.M)) == 4
+    rows = []
+    for results in re.findall(r"results: (\S+)", run.stdout):
+        with Path(results).open() as fh:
+            rows += list(csv.DictReader(fh))
+    # From below (θ = 180° in the object frame is under the cube only where the cube
+    # rests on its -z face) some starts are in the table, stored without a simulation.
+    assert any(row["outcome"] == "infeasible_table" for row in rows)
+    again = subprocess.run(command, capture_output=True, text=True, timeout=400)
+    assert again.returncode == 0, again.stderr
+    assert [int(i) for i in re.findall(r"\(exploration (\d+)\)", again.stdout)] == ids
