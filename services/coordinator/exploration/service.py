@@ -16,6 +16,7 @@ from graspscape.services.coordinator.exploration.schemas import (
     Progress,
 )
 from graspscape.services.coordinator.manifolds import snapshot
+from graspscape.services.coordinator.objects.grippers import gripper_hash_for
 from graspscape.services.coordinator.store import queue, tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
@@ -45,6 +46,7 @@ def create_exploration(
             loc=("body", "object_id"),
         )
     spec = resolve_grid(session, spec)
+    gripper_hash = gripper_hash_for(session, spec.gripper)  # workers fetch it by this hash
     poses_total, first_tiles = initial_tiles(session, spec, target_poses=tile_target_poses)
     if poses_total > max_poses:
         raise InvalidInput(
@@ -63,6 +65,7 @@ def create_exploration(
         viable_count=0,
         created_at=now,
         updated_at=now,
+        gripper_hash=gripper_hash,
     )
     session.add(row)
     session.flush()
