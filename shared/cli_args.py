@@ -80,8 +80,14 @@ def gripper(text: str) -> str:
     """An argparse type: a gripper name as given, a path made absolute (the workers may run
     elsewhere in the file system: another folder, another process); refused when it names
     none, saying what to pass instead."""
-    from graspscape.shared.specs.gripper import find_gripper, unknown_gripper_message
+    from graspscape.shared.specs.gripper import (
+        STORED_GRIPPER,
+        find_gripper,
+        unknown_gripper_message,
+    )
 
+    if STORED_GRIPPER.match(text):  # one stored on a coordinator (POST /grippers)
+        return text
     found = find_gripper(text)
     if found is None:
         raise argparse.ArgumentTypeError(unknown_gripper_message(text))
@@ -89,9 +95,10 @@ def gripper(text: str) -> str:
     return text if is_name else str(Path(text).expanduser().resolve())
 
 
-def add_gripper(parser: argparse.ArgumentParser, default: str | None = None) -> None:
+def add_gripper(parser: argparse.ArgumentParser, default: str | None = None,
+                more: str = "") -> None:
     parser.add_argument("--gripper", type=gripper, default=default, metavar="NAME|PATH",
-                        help=f"{GRIPPER_HELP} (default robotiq_3f)")
+                        help=f"{GRIPPER_HELP}{more} (default robotiq_3f)")
 
 
 def add_grid(parser: argparse.ArgumentParser, *, dtheta: float, r: tuple[float, float, float],
