@@ -73,3 +73,13 @@ def test_malformed_and_oversized_archives_are_refused(monkeypatch: pytest.Monkey
     monkeypatch.setattr(ga, "MAX_ARCHIVE_BYTES", 100)
     with pytest.raises(ga.GripperArchiveError, match="more than the limit of 100"):
         ga.unpack(bomb)
+
+
+def test_every_shipped_gripper_packs_and_loads_from_its_unpacked_archive(tmp_path):
+    from graspscape.shared.specs.gripper import list_grippers
+
+    for name in list_grippers():
+        kind, data = ga.archive_of(find_gripper(name))
+        out = tmp_path / name
+        ga.write_members(ga.unpack(data), out)
+        assert load_gripper(str(ga.local_path(out, kind))).name == load_gripper(name).name
