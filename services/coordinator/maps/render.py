@@ -40,6 +40,7 @@ from graspscape.services.coordinator.manifolds.grouping import (
 )
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
 from graspscape.services.coordinator.maps import derived
+from graspscape.services.coordinator.maps.labels import candidates, place_on_axes
 from graspscape.services.coordinator.maps.panel import reuse_panel
 from graspscape.services.coordinator.maps.points import ROBUST_CODES, MapPoints
 from matplotlib.collections import LineCollection
@@ -173,10 +174,13 @@ def _section(mesh: Any | None, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
 
 
 def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
-              lattice: Lattice, mesh: Any | None, title: str) -> None:
+              lattice: Lattice, mesh: Any | None, title: str) -> tuple[list[Any], list[Any]]:
+    """Draws the cut; returns its manifold labels with their candidate spots, to be placed
+    once the figure is laid out (maps/labels.py), and the contour labels they avoid."""
     X, Y, labels, mu = field["X"], field["Y"], field["labels"], field["mu"]
     e1, e2 = field["e1"], field["e2"]
     n = max(1, len(manifolds))
+    contour_labels: list[Any] = []
     cmap = ListedColormap([_COLOURS[i % 10] for i in range(n)])
     shown = np.ma.masked_invalid(np.where(labels >= 0, labels, np.nan))
     # Raster inside the SVG too: a vector cell per pixel would make a 10 MB file.
@@ -194,7 +198,7 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
             levels = np.linspace(finite.min(), finite.max(), 7)[1:-1]
             cs = ax.contour(X, Y, np.ma.masked_invalid(mu), levels=levels, colors="k",
                             linewidths=0.6)
-            ax.clabel(cs, fmt="%.2f", fontsize=6)
+            contour_labels = ax.clabel(cs, fmt="%.2f", fontsize=6)
     robust = field.get("robust")
     if robust is not None:
         shell = np.isfinite(labels)
@@ -213,19 +217,21 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
     outline = _section(mesh, e1, e2)
     if len(outline):
         ax.add_collection(LineCollection(outline, colors="0.2", linewidths=1.6, zorder=4))
-    for label in range(n):
-        mask = labels == label
-        if mask.sum() > 3:
-            # At the region's pixel nearest its centroid (a ring's centroid lies outside it).
-            xs_, ys_ = X[mask], Y[mask]
-            k = int(np.argmin((xs_ - xs_.mean()) ** 2 + (ys_ - ys_.mean()) ** 2))
-            ax.text(float(xs_[k]), float(ys_[k]), f"${label_name(label)}$",
-                    fontsize=13, ha="center", va="center", zorder=5, weight="bold")
+    texts = []
+    sizes = [(int((labels == label).sum()), label) for label in range(n)]
+    for count, label in sorted(sizes, key=lambda s: (-s[0], s[1])):  # larger regions first
+        if count > 3:
+            mask = labels == label
+            spots = candidates(X[mask], Y[mask])
+            text = ax.text(*spots[0], f"${label_name(label)}$", fontsize=13, ha="center",
+                           va="center", zorder=5, weight="bold", gid="manifold-label")
+            texts.append((text, spots))
     for x, y, _ in maxima_in_cut(field, manifolds, lattice):
         ax.plot(x, y, "o", color="yellow", markeredgecolor="k", markersize=6, zorder=6)
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("m")
+    return texts, contour_labels
 
 
 def _draw_3d(ax: Any, lattice: Lattice, points: MapPoints, mesh: Any | None) -> None:
@@ -274,17 +280,31 @@ def _figure(field: dict[str, Any], lattice: Lattice, points: MapPoints,
             manifolds: list[ManifoldSummary], mesh: Any | None, *, cut: Cut, phi0: float,
             attitude: int, fmt: Literal["png", "svg"], title: str, r_level: float | None,
             panel_key: Hashable | None) -> bytes:
+    fig = compose(field, lattice, points, manifolds, mesh, cut=cut, phi0=phi0,
+                  attitude=attitude, title=title, r_level=r_level,
+                  panel_key=panel_key if fmt == "png" else None)
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=110)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def compose(field: dict[str, Any], lattice: Lattice, points: MapPoints,
+            manifolds: list[ManifoldSummary], mesh: Any | None, *, cut: Cut, phi0: float,
+            attitude: int, title: str = "", r_level: float | None = None,
+            panel_key: Hashable | None = None) -> Any:
+    """The laid-out figure, labels placed (call under `_drawing`; close it when done)."""
     fig = plt.figure(figsize=(12, 5.6))
     ax = fig.add_subplot(1, 2, 1)
     roll = lattice.attitudes[attitude][0]
     where = "z = 0" if cut == "horizontal" else f"vertical plane at φ = {math.degrees(phi0):.0f}°"
     if r_level is not None:
         where += f", r = {r_level * 1000:g} mm"
-    _draw_cut(ax, field, manifolds, lattice, mesh,
-              f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
+    texts, contour_labels = _draw_cut(ax, field, manifolds, lattice, mesh,
+                                      f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     _draw_3d(ax3, lattice, points, mesh)
-    if panel_key is not None and fmt == "png":
+    if panel_key is not None:
         reuse_panel(ax, ax3, panel_key)
     large = [m for m in manifolds if m.large]
     dust = [m for m in manifolds if not m.large]
@@ -314,10 +334,10 @@ def _figure(field: dict[str, Any], lattice: Lattice, points: MapPoints,
     # tight_layout leaves a placeholder layout engine behind, for which savefig first draws
     # the whole figure once without rendering (~30 % of a render); the layout is done.
     fig.set_layout_engine(None)
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=110)
-    plt.close(fig)
-    return buf.getvalue()
+    ax.set_xlim(ax.get_xlim())  # the placement below must not move the view it measures in
+    ax.set_ylim(ax.get_ylim())
+    place_on_axes(ax, texts, contour_labels)
+    return fig
 
 
 def warm_up() -> None:
