@@ -80,14 +80,8 @@ def gripper(text: str) -> str:
     """An argparse type: a gripper name as given, a path made absolute (the workers may run
     elsewhere in the file system: another folder, another process); refused when it names
     none, saying what to pass instead."""
-    from graspscape.shared.specs.gripper import (
-        STORED_GRIPPER,
-        find_gripper,
-        unknown_gripper_message,
-    )
+    from graspscape.shared.specs.gripper import find_gripper, unknown_gripper_message
 
-    if STORED_GRIPPER.match(text):  # one stored on a coordinator (POST /grippers)
-        return text
     found = find_gripper(text)
     if found is None:
         raise argparse.ArgumentTypeError(unknown_gripper_message(text))
@@ -95,9 +89,18 @@ def gripper(text: str) -> str:
     return text if is_name else str(Path(text).expanduser().resolve())
 
 
+def stored_or_gripper(text: str) -> str:
+    """`gripper`, or the name of one stored on a coordinator ('sha256:<hash>', POST
+    /grippers), for the commands that talk to one."""
+    from graspscape.shared.specs.gripper import STORED_GRIPPER
+
+    return text if STORED_GRIPPER.match(text) else gripper(text)
+
+
 def add_gripper(parser: argparse.ArgumentParser, default: str | None = None,
-                more: str = "") -> None:
-    parser.add_argument("--gripper", type=gripper, default=default, metavar="NAME|PATH",
+                more: str = "", *, stored: bool = False) -> None:
+    parser.add_argument("--gripper", type=stored_or_gripper if stored else gripper,
+                        default=default, metavar="NAME|PATH",
                         help=f"{GRIPPER_HELP}{more} (default robotiq_3f)")
 
 

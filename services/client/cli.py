@@ -125,7 +125,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     cli_args.add_object(submit)
     cli_args.add_gripper(submit, more="; one found on this machine (not a shipped one) is "
                          "uploaded to the coordinator, which ships it to the workers; "
-                         "'sha256:<hash>' names one uploaded before")
+                         "'sha256:<hash>' names one uploaded before", stored=True)
     cli_args.add_grid(submit, dtheta=DEFAULT_DTHETA_DEG, r=DEFAULT_R, levels=DEFAULT_LEVELS)
     cli_args.add_object_properties(submit)
     submit.add_argument(

@@ -30,6 +30,11 @@ def test_submit_uploads_a_local_gripper_and_names_it_by_its_hash(
     with Client(live_url) as api:
         again = api.add_gripper(folder / "gripper.toml")
     assert again.gripper == row.spec["gripper"]
+    # ... and a later submit names it by that name alone.
+    assert main(["submit", "sphere", *GRID, "--gripper", again.gripper, "--url", live_url]) == 0
+    later = int(capsys.readouterr().out.strip())
+    with sessions() as s:
+        assert s.get(ExplorationRow, later).gripper_hash == again.content_hash
 
 
 def test_submit_names_a_shipped_gripper_as_given(live_url, sessions, capsys) -> None:
