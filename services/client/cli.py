@@ -36,11 +36,12 @@ def _progress_line(state) -> str:  # type: ignore[no-untyped-def]
 def _gripper(api, name_or_path: str) -> str:  # type: ignore[no-untyped-def]
     """What the spec names the gripper by: a shipped gripper's name as given; one found on
     this machine (a path, or a name in GRASPSCAPE_GRIPPER_PATH) uploaded, since the
-    coordinator elsewhere cannot read it; anything else as given, for the coordinator."""
+    coordinator elsewhere cannot read it; anything else ('sha256:…') as given."""
     from graspscape.shared.specs.gripper import find_gripper, is_shipped
 
     found = find_gripper(name_or_path)
-    if found is None or is_shipped(found):
+    bare = not Path(name_or_path).suffix and len(Path(name_or_path).parts) == 1
+    if found is None or (bare and is_shipped(found)):
         return name_or_path
     stored = api.add_gripper(found)
     print(f"gripper {stored.name} uploaded as {stored.gripper}", file=sys.stderr)

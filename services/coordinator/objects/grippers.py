@@ -63,8 +63,9 @@ def gripper_hash_for(session: Session, gripper: str) -> str | None:
                                "POST /grippers first", loc=_loc())
         return content_hash
     found = find_gripper(gripper)
-    if found is not None and is_shipped(found):
-        return None
+    bare = not PurePosixPath(gripper).suffix and len(PurePosixPath(gripper).parts) == 1
+    if found is not None and bare and is_shipped(found):
+        return None  # a name every worker resolves the same; a path may not exist there
     try:
         kind, archive = archive_of_name(gripper)
     except ValueError as exc:

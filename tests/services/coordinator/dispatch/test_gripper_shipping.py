@@ -60,6 +60,11 @@ def test_a_shipped_gripper_travels_by_name(
     (tile,) = lease(client, "w-1")
     assert tile.gripper_ref is not None and tile.gripper_ref.content_hash is None
     assert tile.gripper_ref.name == "parallel_jaw"
+    # By a path into the shipped folder (which may be elsewhere on a worker): by its archive.
+    by_path = _submit(any_sessions, str(CONFIG_DIR / "experimental" / "robotiq_2f85"))
+    with any_sessions() as session:
+        stored = session.get(ExplorationRow, by_path).gripper_hash
+        assert stored is not None and session.get(GripperRow, stored).kind == "urdf"
 
 
 def test_a_worker_without_the_gripper_fetches_it_and_evaluates_a_pose(
