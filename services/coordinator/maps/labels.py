@@ -96,9 +96,11 @@ def candidates(xs: Any, ys: Any, n: int = CANDIDATES) -> list[tuple[float, float
 
 
 def place_on_axes(ax: Any, texts: list[tuple[Any, list[tuple[float, float]]]],
-                  fixed: list[Any] = ()) -> list[Box]:
+                  fixed: list[Any] = (), dots: list[tuple[float, float]] = (),
+                  dot_pt: float = 6.0) -> list[Box]:
     """Move each (text, its candidate spots in data coordinates) of a laid-out axes to its
-    placement; `fixed`: texts that stay where they are and are avoided (the contour labels).
+    placement; `fixed`: texts that stay where they are and are avoided (the contour labels);
+    `dots`: markers of `dot_pt` points drawn over the labels (the local maxima), avoided too.
     A text with no free spot is removed. Returns the boxes placed, in display units."""
     ax.apply_aspect()  # an equal-aspect axes takes its final box when drawn: take it now
     renderer = ax.figure.canvas.get_renderer()
@@ -111,6 +113,8 @@ def place_on_axes(ax: Any, texts: list[tuple[Any, list[tuple[float, float]]]],
     frame = ax.get_window_extent(renderer)
     obstacles = [tuple(t.get_window_extent(renderer).extents) for t in fixed
                  if t.get_visible() and t.get_text()]
+    side = dot_pt * ax.figure.dpi / 72
+    obstacles += [box_at(tuple(to_display(d)), (side, side)) for d in dots]
     boxes = []
     for (text, _), request, placement in zip(texts, requests,
                                               place(requests, tuple(frame.extents), obstacles),

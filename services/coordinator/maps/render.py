@@ -174,9 +174,11 @@ def _section(mesh: Any | None, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
 
 
 def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
-              lattice: Lattice, mesh: Any | None, title: str) -> tuple[list[Any], list[Any]]:
+              lattice: Lattice, mesh: Any | None, title: str
+              ) -> tuple[list[Any], list[Any], list[tuple[float, float]]]:
     """Draws the cut; returns its manifold labels with their candidate spots, to be placed
-    once the figure is laid out (maps/labels.py), and the contour labels they avoid."""
+    once the figure is laid out (maps/labels.py), and the contour labels and local maxima's
+    dots they avoid."""
     X, Y, labels, mu = field["X"], field["Y"], field["labels"], field["mu"]
     e1, e2 = field["e1"], field["e2"]
     n = max(1, len(manifolds))
@@ -226,12 +228,13 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
             text = ax.text(*spots[0], f"${label_name(label)}$", fontsize=13, ha="center",
                            va="center", zorder=5, weight="bold", gid="manifold-label")
             texts.append((text, spots))
-    for x, y, _ in maxima_in_cut(field, manifolds, lattice):
-        ax.plot(x, y, "o", color="yellow", markeredgecolor="k", markersize=6, zorder=6)
+    dots = [(x, y) for x, y, _ in maxima_in_cut(field, manifolds, lattice)]
+    for x, y in dots:
+        ax.plot(x, y, "o", color="yellow", markeredgecolor="k", markersize=MAXIMUM_PT, zorder=6)
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("m")
-    return texts, contour_labels
+    return texts, contour_labels, dots
 
 
 def _draw_3d(ax: Any, lattice: Lattice, points: MapPoints, mesh: Any | None) -> None:
@@ -271,6 +274,8 @@ def render_map(
                        panel_key=panel_key)
 
 
+MAXIMUM_PT = 6  # a local maximum's dot, points across
+
 # One figure at a time per process: pyplot's figure registry and mathtext's parser are not
 # thread-safe (two pictures drawn at once in the server's threads can fail to parse a label).
 _drawing = threading.Lock()
@@ -300,8 +305,9 @@ def compose(field: dict[str, Any], lattice: Lattice, points: MapPoints,
     where = "z = 0" if cut == "horizontal" else f"vertical plane at φ = {math.degrees(phi0):.0f}°"
     if r_level is not None:
         where += f", r = {r_level * 1000:g} mm"
-    texts, contour_labels = _draw_cut(ax, field, manifolds, lattice, mesh,
-                                      f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
+    texts, contour_labels, dots = _draw_cut(
+        ax, field, manifolds, lattice, mesh,
+        f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     _draw_3d(ax3, lattice, points, mesh)
     if panel_key is not None:
@@ -336,7 +342,7 @@ def compose(field: dict[str, Any], lattice: Lattice, points: MapPoints,
     fig.set_layout_engine(None)
     ax.set_xlim(ax.get_xlim())  # the placement below must not move the view it measures in
     ax.set_ylim(ax.get_ylim())
-    place_on_axes(ax, texts, contour_labels)
+    place_on_axes(ax, texts, contour_labels, dots, MAXIMUM_PT)
     return fig
 
 

@@ -44,10 +44,13 @@ def _crowded_map():  # type: ignore[no-untyped-def]
                        label.astype(np.int64), np.full(n, ROBUST_CODES["robust"]))
     brief = PoseBrief(key="0", theta=math.pi / 2, phi=0.0, r=0.0, roll=0.0, pitch=0.0, yaw=0.0,
                       mu_s=0.4, effort_max_nm=1.0)
+    # Local maxima in the plane, every few directions (each drawn where its manifold is).
+    maxima = [brief.model_copy(update={"key": str(k), "phi": k * math.pi / 12, "r": 0.005})
+              for k in range(0, 24, 2)]
     manifolds = [ManifoldSummary(
         label=k, name=chr(65 + k), description="", digits=[], pose_count=1,
         evaluated_count=1, volume_cm3=1.0, mu_s_min=0.2, mu_s_mean=0.3, mu_s_max=0.4,
-        mu_s_std=0.0, best=brief, local_maxima=[]) for k in range(N_MANIFOLDS)]
+        mu_s_std=0.0, best=brief, local_maxima=maxima) for k in range(N_MANIFOLDS)]
     return mesh, lattice, points, manifolds
 
 
@@ -60,15 +63,18 @@ def test_the_labels_of_a_crowded_cut_do_not_overlap(monkeypatch: pytest.MonkeyPa
     mesh, lattice, points, manifolds = _crowded_map()
     field = render.cut_field(lattice, points, mesh, cut="horizontal")
     at_centres = []  # each label's box at its region's centre, where it was drawn before
+    drawn_dots: list = []  # the local maxima's dots, drawn over the labels
 
-    def placing(ax, texts, fixed=()):  # type: ignore[no-untyped-def]
+    def placing(ax, texts, fixed=(), dots=(), dot_pt=6.0):  # type: ignore[no-untyped-def]
         renderer = ax.figure.canvas.get_renderer()
         ax.apply_aspect()
         for text, spots in texts:
             extent = text.get_window_extent(renderer)
             centre = tuple(ax.transData.transform(spots[0]))
             at_centres.append(box_at(centre, (extent.width, extent.height)))
-        return place_on_axes(ax, texts, fixed)
+        drawn_dots.extend(box_at(tuple(ax.transData.transform(d)), (6 * ax.figure.dpi / 72,) * 2)
+                          for d in dots)
+        return place_on_axes(ax, texts, fixed, dots, dot_pt)
 
     monkeypatch.setattr(render, "place_on_axes", placing)
     with render._drawing:
@@ -90,8 +96,9 @@ def test_the_labels_of_a_crowded_cut_do_not_overlap(monkeypatch: pytest.MonkeyPa
     assert sum(overlap(a, b) for a, b in combinations(at_centres, 2)) >= 10  # it is crowded
     for a, b in combinations(boxes, 2):
         assert not overlap(a, b), (a, b)
+    assert len(drawn_dots) >= 5
     for a in boxes:
-        assert not any(overlap(a, b) for b in others)
+        assert not any(overlap(a, b) for b in others + drawn_dots)
         assert frame[0] <= a[0] and a[2] <= frame[2] and frame[1] <= a[1] and a[3] <= frame[3]
 
 
