@@ -89,9 +89,19 @@ def gripper(text: str) -> str:
     return text if is_name else str(Path(text).expanduser().resolve())
 
 
-def add_gripper(parser: argparse.ArgumentParser, default: str | None = None) -> None:
-    parser.add_argument("--gripper", type=gripper, default=default, metavar="NAME|PATH",
-                        help=f"{GRIPPER_HELP} (default robotiq_3f)")
+def stored_or_gripper(text: str) -> str:
+    """`gripper`, or the name of one stored on a coordinator ('sha256:<hash>', POST
+    /grippers), for the commands that talk to one."""
+    from graspscape.shared.specs.gripper import STORED_GRIPPER
+
+    return text if STORED_GRIPPER.match(text) else gripper(text)
+
+
+def add_gripper(parser: argparse.ArgumentParser, default: str | None = None,
+                more: str = "", *, stored: bool = False) -> None:
+    parser.add_argument("--gripper", type=stored_or_gripper if stored else gripper,
+                        default=default, metavar="NAME|PATH",
+                        help=f"{GRIPPER_HELP}{more} (default robotiq_3f)")
 
 
 def add_grid(parser: argparse.ArgumentParser, *, dtheta: float, r: tuple[float, float, float],

@@ -33,6 +33,21 @@ def _progress_line(state) -> str:  # type: ignore[no-untyped-def]
     return line
 
 
+def _gripper(api, name_or_path: str) -> str:  # type: ignore[no-untyped-def]
+    """What the spec names the gripper by: a shipped gripper's name as given; one found on
+    this machine (a path, or a name in GRASPSCAPE_GRIPPER_PATH) uploaded, since the
+    coordinator elsewhere cannot read it; anything else ('sha256:…') as given."""
+    from graspscape.shared.specs.gripper import find_gripper, is_shipped
+
+    found = find_gripper(name_or_path)
+    bare = not Path(name_or_path).suffix and len(Path(name_or_path).parts) == 1
+    if found is None or (bare and is_shipped(found)):
+        return name_or_path
+    stored = api.add_gripper(found)
+    print(f"gripper {stored.name} uploaded as {stored.gripper}", file=sys.stderr)
+    return stored.gripper
+
+
 def _submit(args: argparse.Namespace) -> int:
     # explore's defaults, so that the same command line asks for the same exploration
     grid = {"dtheta": math.radians(_given(args.dtheta, DEFAULT_DTHETA_DEG)),
@@ -40,8 +55,6 @@ def _submit(args: argparse.Namespace) -> int:
             "dr": _given(args.dr, DEFAULT_R[2]), "attitudes": {"rolls": _given(args.rolls, 1)}}
     spec: dict = {"grid": grid, "refinement": {"levels": _given(args.levels, DEFAULT_LEVELS)},
                   "label": args.label or f"graspscape submit {args.object}"}
-    if args.gripper is not None:
-        spec["gripper"] = args.gripper
     if args.uncertainty is not None:
         spec["uncertainty"] = {"preset": args.uncertainty}
     props = {"mass_kg": args.mass, "friction": args.friction, "scale": args.scale,
@@ -50,6 +63,8 @@ def _submit(args: argparse.Namespace) -> int:
         is_file = Path(args.object).suffix and Path(args.object).is_file()
         obj = (api.add_object(mesh=args.object, **props) if is_file
                else api.add_object(args.object, **props))
+        if args.gripper is not None:
+            spec["gripper"] = _gripper(api, args.gripper)
         run = api.submit({**spec, "object_id": obj.id})
         print(run.id)
         print(f"exploration {run.id}: {run.poses_total} poses queued", file=sys.stderr)
@@ -109,7 +124,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     submit = subparsers.add_parser("submit", help="store an object on a running coordinator "
                                    "and submit its exploration (prints the id)")
     cli_args.add_object(submit)
-    cli_args.add_gripper(submit)
+    cli_args.add_gripper(submit, more="; one found on this machine (not a shipped one) is "
+                         "uploaded to the coordinator, which ships it to the workers; "
+                         "'sha256:<hash>' names one uploaded before", stored=True)
     cli_args.add_grid(submit, dtheta=DEFAULT_DTHETA_DEG, r=DEFAULT_R, levels=DEFAULT_LEVELS)
     cli_args.add_object_properties(submit)
     submit.add_argument(

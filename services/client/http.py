@@ -28,6 +28,7 @@ from graspscape.services.client.models import (
     Manifolds,
     Pose,
     Retried,
+    StoredGripper,
     StoredObject,
     Submitted,
 )
@@ -112,6 +113,22 @@ class Client:
         else:
             answer = self._request("POST", "/objects", data={**data, "name": name or ""})
         return StoredObject.model_validate(answer.json())
+
+    def add_gripper(self, path: Path | str) -> StoredGripper:
+        """Upload a gripper of one's own: a TOML spec file, or a URDF gripper's folder (zipped
+        here, its files only). Name it in a spec by the answer's `gripper` ('sha256:…'); the
+        coordinator ships it to the workers."""
+        from graspscape.shared.specs.gripper import URDF_DESCRIPTION
+        from graspscape.shared.specs.gripper_archive import folder_files, pack
+
+        path = Path(path).expanduser()
+        folder = path.parent if path.name == URDF_DESCRIPTION else path
+        if folder.is_dir():
+            upload = (f"{folder.name or 'gripper'}.zip", pack(folder_files(folder)))
+        else:
+            upload = (path.name, path.read_bytes())
+        answer = self._request("POST", "/grippers", files={"file": upload})
+        return StoredGripper.model_validate(answer.json())
 
     def submit(self, spec: BaseModel | dict[str, Any]) -> Submitted:
         body = spec.model_dump(mode="json") if isinstance(spec, BaseModel) else spec

@@ -63,6 +63,16 @@ class Exploration(_Answer):
         return self.status in FINISHED
 
 
+class StoredGripper(_Answer):
+    """A gripper stored on the coordinator: `gripper` is what a spec names it by."""
+
+    gripper: str
+    content_hash: str
+    kind: str
+    name: str
+    size_bytes: int
+
+
 class Submitted(_Answer):
     id: int
     status: str

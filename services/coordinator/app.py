@@ -24,6 +24,7 @@ from graspscape.services.coordinator.api import (
     budget,
     datasets,
     explorations,
+    grippers,
     health,
     manifolds,
     objects,
@@ -160,8 +161,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 exc.headers = {**(exc.headers or {}), "Allow": ", ".join(methods)}
         return await http_exception_handler(request, exc)
 
-    for router in (objects.router, explorations.router, budget.router, workers.router,
-                   health.router):
+    for router in (objects.router, grippers.router, explorations.router, budget.router,
+                   workers.router, health.router):
         app.include_router(router)
     app.include_router(manifolds.router)
     app.include_router(datasets.router)

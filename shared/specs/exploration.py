@@ -12,12 +12,24 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from graspscape.shared.specs.gripper import find_gripper, unknown_gripper_message
+from graspscape.shared.specs.gripper import (
+    STORED_GRIPPER,
+    STORED_PREFIX,
+    find_gripper,
+    unknown_gripper_message,
+)
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import POLICY_NAMES, SimSettings
 from graspscape.shared.specs.support import RestingPose, SupportSpec, support_problem, table_scene
 from graspscape.shared.specs.uncertainty import UncertaintyModel
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 # Names of grippers and policies are resolved by the workers (configs/grippers, policy
 # registry); here they only have to be safe identifiers.
@@ -318,8 +330,9 @@ class ExplorationSpec(BaseModel):
     gripper: str = Field(
         default="robotiq_3f", min_length=1, max_length=1024, pattern=r"^[^\x00-\x1f]*$",
         description="gripper: a name (the shipped grippers, or one in the folders of "
-        "GRASPSCAPE_GRIPPER_PATH), or an absolute path to a TOML spec or a URDF gripper's "
-        "folder, as the coordinator and the workers see it"
+        "GRASPSCAPE_GRIPPER_PATH), an absolute path to a TOML spec or a URDF gripper's folder "
+        "as the coordinator sees it, or 'sha256:<hash>' of one uploaded with POST /grippers; "
+        "any but a shipped gripper is packed at submit and fetched by the workers"
     )
     grid: PoseGridSpec = Field(default_factory=PoseGridSpec)
     settings: SimSettings = Field(
@@ -370,7 +383,16 @@ class ExplorationSpec(BaseModel):
 
     @field_validator("gripper")
     @classmethod
-    def _known_gripper(cls, name: str) -> str:
+    def _known_gripper(cls, name: str, info: ValidationInfo) -> str:
+        # A stored spec is read again without the check: its gripper was packed at submit
+        # and travels by hash (explorations.gripper_hash), so the path may be gone since.
+        # A `sha256:` name is one stored on the coordinator, which checks it at submit.
+        stored = isinstance(info.context, dict) and info.context.get("stored")
+        if stored or STORED_GRIPPER.match(name):
+            return name
+        if name.startswith(STORED_PREFIX):
+            raise ValueError(f"{name!r}: a stored gripper is '{STORED_PREFIX}' and 64 "
+                             "lower-case hex digits, as POST /grippers answers")
         if find_gripper(name) is None:
             raise ValueError(unknown_gripper_message(name))
         return name

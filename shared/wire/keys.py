@@ -21,6 +21,8 @@ RESULTS_QUERYABLE = f"{PREFIX}/results/**"
 
 # A worker fetches a mesh by content hash with a get on object_key(); the reply is the mesh.
 OBJECT_QUERYABLE = f"{PREFIX}/object/**"
+# A gripper's archive, the same way by its content hash on gripper_key().
+GRIPPER_QUERYABLE = f"{PREFIX}/gripper/**"
 
 # Each worker process holds one liveliness token on alive_key(worker_id) while it runs.
 ALIVE_PREFIX = f"{PREFIX}/alive"
@@ -44,6 +46,12 @@ def object_key(content_hash: str) -> str:
     if not _HASH.match(content_hash):
         raise ValueError(f"content hash {content_hash!r} is not 64 lower-case hex digits")
     return f"{PREFIX}/object/{content_hash}"
+
+
+def gripper_key(content_hash: str) -> str:
+    if not _HASH.match(content_hash):
+        raise ValueError(f"content hash {content_hash!r} is not 64 lower-case hex digits")
+    return f"{PREFIX}/gripper/{content_hash}"
 
 
 def alive_key(worker_id: str) -> str:

@@ -14,6 +14,7 @@ from enum import StrEnum
 from typing import Annotated, Any, Literal
 
 from graspscape.shared.specs.exploration import ConfigurationMatch
+from graspscape.shared.specs.gripper_archive import MAX_ARCHIVE_BYTES
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose, tile_poses
 from graspscape.shared.specs.results import PoseResult
@@ -81,6 +82,20 @@ class ObjectRef(BaseModel):
         return ObjectSpec(name=self.name, **self.properties)
 
 
+ContentHash = Annotated[str, Field(pattern=r"^[0-9a-f]{64}$")]
+
+
+class GripperRef(BaseModel):
+    """What a worker needs to load the gripper: a shipped gripper's name (every worker has
+    those), or the content hash and kind of the archive the coordinator packed at submit."""
+
+    model_config = ConfigDict(frozen=True)
+
+    name: str | None = Field(default=None, max_length=1024)
+    content_hash: ContentHash | None = None
+    kind: Literal["toml", "urdf"] | None = None
+
+
 class LeasedTile(BaseModel):
     """One tile as leased: the poses to evaluate (cells × r levels × attitudes) and the lease
     to report under. The store's lease returns it (store/tiles.py) and the wire message
@@ -107,7 +122,10 @@ class TileLease(_Message, LeasedTile):
 
     kind: Literal["tile_lease"] = "tile_lease"
     object: ObjectRef
-    gripper: str
+    gripper: str  # the spec's gripper string, as submitted
+    # Added with a default: with a content hash, the gripper is fetched by it (a worker of
+    # before that resolves `gripper` itself, as it always did).
+    gripper_ref: GripperRef | None = None
     settings: SimSettings
     configuration_match: ConfigurationMatch | None = Field(
         default=None, description="shortcut 2 (see workers/sim/configuration_inference.py): "
@@ -115,10 +133,11 @@ class TileLease(_Message, LeasedTile):
 
     @classmethod
     def of(cls, tile: LeasedTile, *, object: ObjectRef, gripper: str, settings: SimSettings,
-           configuration_match: ConfigurationMatch | None = None) -> TileLease:
+           configuration_match: ConfigurationMatch | None = None,
+           gripper_ref: GripperRef | None = None) -> TileLease:
         """The lease message of a tile the store leased."""
         return cls(**dict(tile), object=object, gripper=gripper, settings=settings,
-                   configuration_match=configuration_match)
+                   configuration_match=configuration_match, gripper_ref=gripper_ref)
 
 
 class ResultBatch(_Message):
@@ -196,6 +215,29 @@ class ObjectData(_Message):
         return base64.b64decode(self.mesh_b64, validate=True)
 
 
+class GripperRequest(_Message):
+    kind: Literal["gripper_request"] = "gripper_request"
+    content_hash: ContentHash
+
+
+class GripperData(_Message):
+    """A gripper's archive (shared/specs/gripper_archive.py), base64: at most
+    MAX_ARCHIVE_BYTES once decoded."""
+
+    kind: Literal["gripper_data"] = "gripper_data"
+    content_hash: ContentHash
+    gripper_kind: Literal["toml", "urdf"]
+    archive_b64: str = Field(max_length=4 * (MAX_ARCHIVE_BYTES // 3 + 1))
+
+    @classmethod
+    def of(cls, content_hash: str, kind: str, archive: bytes) -> GripperData:
+        return cls(content_hash=content_hash, gripper_kind=kind,
+                   archive_b64=base64.b64encode(archive).decode())
+
+    def archive(self) -> bytes:
+        return base64.b64decode(self.archive_b64, validate=True)
+
+
 class ErrorCode(StrEnum):
     MALFORMED = "malformed"  # not JSON, or fields fail validation
     UNSUPPORTED_VERSION = "unsupported_version"
@@ -224,6 +266,7 @@ class ErrorReply(_Message):
 
 
 Message = Annotated[
-    LeaseRequest | TileLease | ResultBatch | Ack | ObjectRequest | ObjectData | ErrorReply,
+    LeaseRequest | TileLease | ResultBatch | Ack | ObjectRequest | ObjectData | GripperRequest
+    | GripperData | ErrorReply,
     Field(discriminator="kind"),
 ]

@@ -35,6 +35,7 @@ from graspscape.shared.wire.messages import (
 from graspscape.shared.wire.session import zenoh_config
 from graspscape.workers.runtime.backoff import Backoff
 from graspscape.workers.runtime.config import WorkerConfig
+from graspscape.workers.runtime.grippers import GripperCache
 from graspscape.workers.runtime.instant import instant_result
 from graspscape.workers.runtime.isolation import ErrorStreak, error_result, finite_or_error
 from graspscape.workers.runtime.objects import ObjectCache, ObjectFetchError
@@ -81,6 +82,7 @@ class WorkerProcess:
         token = self.session.liveliness().declare_token(keys.alive_key(self.worker_id))
         cache_dir = self.config.cache_dir or _default_cache_dir()
         self.objects = ObjectCache(self.session, cache_dir, self.config.query_timeout_s)
+        self.grippers = GripperCache(self.session, cache_dir, self.config.query_timeout_s)
         self.cache_dir = cache_dir
         log.info("%s connected to %s", self.worker_id, self.config.connect)
         freeze_startup_heap()
@@ -186,8 +188,10 @@ class WorkerProcess:
         results: list[PoseResult] = []
         try:
             obj = None if self.config.instant else self.objects.spec(tile.object)
-        except ObjectFetchError as exc:
-            if not exc.transient:  # no such mesh, or a corrupt one: the tile fails here
+            if not self.config.instant:  # fetched now, so that a failure is the tile's
+                self.grippers.gripper(tile.gripper_ref, tile.gripper)
+        except ObjectFetchError as exc:  # a mesh's or a gripper's (GripperFetchError)
+            if not exc.transient:  # none with that hash, or a corrupt one: the tile fails here
                 self._deliver(self._batch(tile, [], final=False, error=str(exc)))
                 return None
             # The coordinator is unreachable right now: not the tile's fault, so it goes
@@ -264,7 +268,8 @@ class WorkerProcess:
             return instant_result(pose)
         from graspscape.workers.sim.evaluate import evaluate_pose
 
-        return evaluate_pose(pose, obj=obj, gripper=tile.gripper, settings=tile.settings,
+        gripper = self.grippers.gripper(tile.gripper_ref, tile.gripper)  # in memory by now
+        return evaluate_pose(pose, obj=obj, gripper=gripper, settings=tile.settings,
                              cache_dir=self.cache_dir, donors=donors)
 
     def _batch(self, tile: TileLease, results: list[PoseResult], *, final: bool,

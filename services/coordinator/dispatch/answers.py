@@ -50,7 +50,8 @@ class Leased:
             ctx = self.contexts[tile.exploration_id]
             out.append(TileLease.of(tile, object=ctx.object, gripper=ctx.gripper,
                                     settings=ctx.settings,
-                                    configuration_match=ctx.configuration_match))
+                                    configuration_match=ctx.configuration_match,
+                                    gripper_ref=ctx.gripper_ref))
         return out
 
 

@@ -13,10 +13,22 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from graspscape.services.coordinator.exploration.specs import stored_spec
-from graspscape.services.coordinator.store.models import ExplorationRow, ObjectRow
+from graspscape.services.coordinator.objects.grippers import archive_by_hash
+from graspscape.services.coordinator.store.models import ExplorationRow, GripperRow, ObjectRow
 from graspscape.shared.specs.exploration import ConfigurationMatch, ExplorationSpec
 from graspscape.shared.specs.sim import SimSettings
-from graspscape.shared.wire.messages import ObjectRef
+from graspscape.shared.wire import keys
+from graspscape.shared.wire.codec import decode_as, error
+from graspscape.shared.wire.messages import (
+    ErrorCode,
+    ErrorReply,
+    GripperData,
+    GripperRef,
+    GripperRequest,
+    ObjectData,
+    ObjectRef,
+    ObjectRequest,
+)
 from sqlalchemy import bindparam, select
 from sqlalchemy.orm import Session
 
@@ -33,6 +45,7 @@ class WorkContext:
     gripper: str
     settings: SimSettings
     configuration_match: ConfigurationMatch | None = None  # shortcut 2 on: its tolerance
+    gripper_ref: GripperRef | None = None
 
 
 def configuration_match_of(spec: ExplorationSpec) -> ConfigurationMatch | None:
@@ -86,12 +99,25 @@ class WorkContexts:
             properties=obj.properties or {},
         )
         context = WorkContext(object=ref, gripper=spec.gripper, settings=spec.settings,
-                              configuration_match=configuration_match_of(spec))
+                              configuration_match=configuration_match_of(spec),
+                              gripper_ref=gripper_ref(session, exploration_id, spec.gripper))
         with self._lock:
             if len(self._contexts) >= _MAX_CACHED:
                 self._contexts.clear()
             self._contexts[key] = context
         return context
+
+
+def gripper_ref(session: Session, exploration_id: int, gripper: str) -> GripperRef:
+    """A shipped gripper by name; any other by the archive packed at submit."""
+    row = session.execute(
+        select(GripperRow.content_hash, GripperRow.kind)
+        .join(ExplorationRow, ExplorationRow.gripper_hash == GripperRow.content_hash)
+        .where(ExplorationRow.id == exploration_id)
+    ).one_or_none()
+    if row is None:
+        return GripperRef(name=gripper)
+    return GripperRef(content_hash=row.content_hash, kind=row.kind)
 
 
 def mesh_by_hash(session: Session, content_hash: str) -> tuple[bytes, str] | None:
@@ -103,3 +129,26 @@ def mesh_by_hash(session: Session, content_hash: str) -> tuple[bytes, str] | Non
     if row is None or row.mesh is None or row.mesh_format is None:
         return None
     return bytes(row.mesh), row.mesh_format
+
+
+def fetch_answer(session: Session, data: bytes, kind: str
+                 ) -> tuple[str, ObjectData | GripperData] | ErrorReply:
+    """A worker's fetch of a mesh (`kind` "object") or a gripper's archive ("gripper") by
+    content hash: the reply key and message, or the refusal."""
+    if kind == "object":
+        request = decode_as(data, ObjectRequest)
+        if isinstance(request, ErrorReply):
+            return request
+        found = mesh_by_hash(session, request.content_hash)
+        if found is None:
+            return error(ErrorCode.NOT_FOUND, f"no mesh with content hash {request.content_hash}")
+        return (keys.object_key(request.content_hash),
+                ObjectData.of(request.content_hash, found[1], found[0]))
+    asked = decode_as(data, GripperRequest)
+    if isinstance(asked, ErrorReply):
+        return asked
+    archive = archive_by_hash(session, asked.content_hash)
+    if archive is None:
+        return error(ErrorCode.NOT_FOUND, f"no gripper with content hash {asked.content_hash}")
+    return (keys.gripper_key(asked.content_hash),
+            GripperData.of(asked.content_hash, archive[1], archive[0]))

@@ -4,9 +4,9 @@ Zenoh callbacks only enqueue (a full queue is answered "unavailable" at once); p
 handler threads do the database work and reply inside the query's context (`with query`),
 so the final reply goes out as soon as the answer is complete. Two pools, two queues: result
 batches (ingest: a transaction that waits its turn at the exploration's row lock) and leases
-with object fetches (one short transaction each), so a lease never queues behind a batch's
-commit; leasing stays safe against the ingest threads and other coordinators by the store's
-own means (SKIP LOCKED, lease epochs, lease-owner checks; each answer's store work is
+with mesh and gripper fetches (one short transaction each), so a lease never queues behind a
+batch's commit; leasing stays safe against the ingest threads and other coordinators by the
+store's own means (SKIP LOCKED, lease epochs, lease-owner checks; each answer's store work is
 dispatch/answers.py's). Nothing raised while serving a query escapes: bad input gets an
 error reply, anything raised one as dispatch/refusals.py says, with one log line at most.
 """
@@ -29,7 +29,7 @@ from graspscape.services.coordinator.dispatch.answers import (
     lease_for,
     report_batch,
 )
-from graspscape.services.coordinator.dispatch.catalog import WorkContexts, mesh_by_hash
+from graspscape.services.coordinator.dispatch.catalog import WorkContexts, fetch_answer
 from graspscape.services.coordinator.dispatch.counters import DispatchCounters
 from graspscape.services.coordinator.dispatch.leases import lease_owners, requeue_lost
 from graspscape.services.coordinator.dispatch.outage import StoreOutage
@@ -44,8 +44,6 @@ from graspscape.shared.wire.messages import (
     ErrorCode,
     ErrorReply,
     LeaseRequest,
-    ObjectData,
-    ObjectRequest,
     ResultBatch,
 )
 from graspscape.shared.wire.session import write_users_file, zenoh_config
@@ -72,11 +70,11 @@ class Dispatcher:
         self.outage = StoreOutage()
         self.contexts = WorkContexts()
         self.worker_sessions = WorkerSessions()
-        # kind -> its pool's queue: result batches apart from leases and object fetches.
+        # kind -> its pool's queue: result batches apart from leases and fetches.
         ingest: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
         leases: queue.Queue[Any] = queue.Queue(maxsize=_QUEUE_SIZE)
         self._queues: dict[str, queue.Queue[Any]] = {
-            "results": ingest, "lease": leases, "object": leases}
+            "results": ingest, "lease": leases, "object": leases, "gripper": leases}
         self._pools: list[tuple[queue.Queue[Any], list[threading.Thread]]] = []
         self._lost_keys: queue.SimpleQueue[str | None] = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
@@ -177,6 +175,7 @@ class Dispatcher:
             s.declare_queryable(keys.LEASE_QUERYABLE, self._enqueue("lease")),
             s.declare_queryable(keys.RESULTS_QUERYABLE, self._enqueue("results")),
             s.declare_queryable(keys.OBJECT_QUERYABLE, self._enqueue("object")),
+            s.declare_queryable(keys.GRIPPER_QUERYABLE, self._enqueue("gripper")),
             # history: tokens of workers that were there before this coordinator started.
             s.liveliness().declare_subscriber(keys.ALIVE_ALL, self._on_alive, history=True),
         ]
@@ -259,7 +258,9 @@ class Dispatcher:
 
     def _answer(self, kind: str, query: zenoh.Query) -> None:
         data = query.payload.to_bytes() if query.payload is not None else b""
-        handler = {"lease": self._lease, "results": self._results, "object": self._object}[kind]
+        handler = {"lease": self._lease, "results": self._results,
+                   "object": lambda q, d: self._fetch(q, d, "object"),
+                   "gripper": lambda q, d: self._fetch(q, d, "gripper")}[kind]
         cause: str | None = ""  # the log line's, never the reply's
         try:
             reply = handler(query, data)
@@ -332,17 +333,13 @@ class Dispatcher:
         query.reply(str(query.key_expr), encode(reported.reply))
         return None
 
-    def _object(self, query: zenoh.Query, data: bytes) -> ErrorReply | None:
-        request = decode_as(data, ObjectRequest)
-        if isinstance(request, ErrorReply):
-            return request
+    def _fetch(self, query: zenoh.Query, data: bytes, kind: str) -> ErrorReply | None:
+        """A mesh or a gripper's archive by content hash."""
         with self.sessions() as session:
-            found = mesh_by_hash(session, request.content_hash)
-        if found is None:
-            return error(ErrorCode.NOT_FOUND, f"no mesh with content hash {request.content_hash}")
-        mesh, fmt = found
-        message = ObjectData.of(request.content_hash, fmt, mesh)
-        query.reply(keys.object_key(request.content_hash), encode(message))
+            answer = fetch_answer(session, data, kind)
+        if isinstance(answer, ErrorReply):
+            return answer
+        query.reply(answer[0], encode(answer[1]))
         return None
 
     # -- lost workers ----------------------------------------------------------------------

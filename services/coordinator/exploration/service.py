@@ -17,6 +17,7 @@ from graspscape.services.coordinator.exploration.schemas import (
 )
 from graspscape.services.coordinator.exploration.support import resting_specs
 from graspscape.services.coordinator.manifolds import snapshot
+from graspscape.services.coordinator.objects.grippers import gripper_hash_for
 from graspscape.services.coordinator.store import queue, tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
@@ -68,6 +69,7 @@ def create_explorations(
 def _add_exploration(session: Session, spec: ExplorationSpec, tile_target_poses: int,
                      max_poses: int) -> ExplorationRow:
     spec = resolve_grid(session, spec)
+    gripper_hash = gripper_hash_for(session, spec.gripper)  # workers fetch it by this hash
     poses_total, first_tiles = initial_tiles(session, spec, target_poses=tile_target_poses)
     if poses_total > max_poses:
         raise InvalidInput(
@@ -89,6 +91,7 @@ def _add_exploration(session: Session, spec: ExplorationSpec, tile_target_poses:
         updated_at=now,
         resting_index=None if resting is None else resting.index,
         resting_probability=None if resting is None else resting.probability,
+        gripper_hash=gripper_hash,
     )
     session.add(row)
     session.flush()

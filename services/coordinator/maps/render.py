@@ -40,8 +40,10 @@ from graspscape.services.coordinator.manifolds.grouping import (
 )
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
 from graspscape.services.coordinator.maps import derived
+from graspscape.services.coordinator.maps.labels import candidates, place_on_axes
 from graspscape.services.coordinator.maps.panel import reuse_panel
 from graspscape.services.coordinator.maps.points import ROBUST_CODES, MapPoints
+from graspscape.services.coordinator.maps.table import Table, table_in_3d, table_in_cut
 from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
 
@@ -173,10 +175,15 @@ def _section(mesh: Any | None, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
 
 
 def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
-              lattice: Lattice, mesh: Any | None, title: str) -> None:
+              lattice: Lattice, mesh: Any | None, title: str
+              ) -> tuple[list[Any], list[Any], list[tuple[float, float]]]:
+    """Draws the cut; returns its manifold labels with their candidate spots, to be placed
+    once the figure is laid out (maps/labels.py), and the contour labels and local maxima's
+    dots they avoid."""
     X, Y, labels, mu = field["X"], field["Y"], field["labels"], field["mu"]
     e1, e2 = field["e1"], field["e2"]
     n = max(1, len(manifolds))
+    contour_labels: list[Any] = []
     cmap = ListedColormap([_COLOURS[i % 10] for i in range(n)])
     shown = np.ma.masked_invalid(np.where(labels >= 0, labels, np.nan))
     # Raster inside the SVG too: a vector cell per pixel would make a 10 MB file.
@@ -194,7 +201,7 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
             levels = np.linspace(finite.min(), finite.max(), 7)[1:-1]
             cs = ax.contour(X, Y, np.ma.masked_invalid(mu), levels=levels, colors="k",
                             linewidths=0.6)
-            ax.clabel(cs, fmt="%.2f", fontsize=6)
+            contour_labels = ax.clabel(cs, fmt="%.2f", fontsize=6)
     robust = field.get("robust")
     if robust is not None:
         shell = np.isfinite(labels)
@@ -213,55 +220,22 @@ def _draw_cut(ax: Any, field: dict[str, Any], manifolds: list[ManifoldSummary],
     outline = _section(mesh, e1, e2)
     if len(outline):
         ax.add_collection(LineCollection(outline, colors="0.2", linewidths=1.6, zorder=4))
-    for label in range(n):
-        mask = labels == label
-        if mask.sum() > 3:
-            # At the region's pixel nearest its centroid (a ring's centroid lies outside it).
-            xs_, ys_ = X[mask], Y[mask]
-            k = int(np.argmin((xs_ - xs_.mean()) ** 2 + (ys_ - ys_.mean()) ** 2))
-            ax.text(float(xs_[k]), float(ys_[k]), f"${label_name(label)}$",
-                    fontsize=13, ha="center", va="center", zorder=5, weight="bold")
-    for x, y, _ in maxima_in_cut(field, manifolds, lattice):
-        ax.plot(x, y, "o", color="yellow", markeredgecolor="k", markersize=6, zorder=6)
+    texts = []
+    sizes = [(int((labels == label).sum()), label) for label in range(n)]
+    for count, label in sorted(sizes, key=lambda s: (-s[0], s[1])):  # larger regions first
+        if count > 3:
+            mask = labels == label
+            spots = candidates(X[mask], Y[mask])
+            text = ax.text(*spots[0], f"${label_name(label)}$", fontsize=13, ha="center",
+                           va="center", zorder=5, weight="bold", gid="manifold-label")
+            texts.append((text, spots))
+    dots = [(x, y) for x, y, _ in maxima_in_cut(field, manifolds, lattice)]
+    for x, y in dots:
+        ax.plot(x, y, "o", color="yellow", markeredgecolor="k", markersize=MAXIMUM_PT, zorder=6)
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("m")
-
-
-# On a table: (the table's up in the object frame, the centre of mass's height over it, m).
-Table = tuple[np.ndarray, float]
-
-
-def _table_in_cut(ax: Any, field: dict[str, Any], table: Table) -> None:
-    """The table's trace in the cut (a line, the side under it shaded), where the cut is not
-    parallel to it."""
-    up, height = table
-    a, b = float(up @ field["e1"]), float(up @ field["e2"])
-    norm = math.hypot(a, b)
-    if norm < 1e-6:
-        return
-    X, Y = field["X"], field["Y"]
-    reach = 2.0 * float(max(np.abs(X).max(), np.abs(Y).max()))
-    normal = np.array([a, b]) / norm
-    on = -height / norm * normal  # the nearest point of the trace to the centre of mass
-    along = np.array([-normal[1], normal[0]]) * reach
-    below = on - normal * reach
-    ax.fill(*np.array([on - along, on + along, below + along, below - along]).T,
-            color="0.45", alpha=0.35, zorder=3, linewidth=0)
-    ax.plot(*np.array([on - along, on + along]).T, color="0.25", linewidth=1.4, zorder=4)
-    ax.set_xlim(float(X.min()), float(X.max()))
-    ax.set_ylim(float(Y.min()), float(Y.max()))
-
-
-def _table_in_3d(ax: Any, table: Table, size: float) -> None:
-    """The table as a translucent square under the object in the 3D view."""
-    up, height = table
-    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(up, e1)
-    s, t = np.meshgrid([-size, size], [-size, size])
-    corner = -height * up[:, None, None] + e1[:, None, None] * s + e2[:, None, None] * t
-    ax.plot_surface(*corner, color="0.45", alpha=0.3, linewidth=0)
+    return texts, contour_labels, dots
 
 
 def _draw_3d(ax: Any, lattice: Lattice, points: MapPoints, mesh: Any | None) -> None:
@@ -303,6 +277,8 @@ def render_map(
                        panel_key=panel_key, table=table)
 
 
+MAXIMUM_PT = 6  # a local maximum's dot, points across
+
 # One figure at a time per process: pyplot's figure registry and mathtext's parser are not
 # thread-safe (two pictures drawn at once in the server's threads can fail to parse a label).
 _drawing = threading.Lock()
@@ -312,20 +288,35 @@ def _figure(field: dict[str, Any], lattice: Lattice, points: MapPoints,
             manifolds: list[ManifoldSummary], mesh: Any | None, *, cut: Cut, phi0: float,
             attitude: int, fmt: Literal["png", "svg"], title: str, r_level: float | None,
             panel_key: Hashable | None, table: Table | None = None) -> bytes:
+    fig = compose(field, lattice, points, manifolds, mesh, cut=cut, phi0=phi0,
+                  attitude=attitude, title=title, r_level=r_level,
+                  panel_key=panel_key if fmt == "png" else None, table=table)
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=110)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def compose(field: dict[str, Any], lattice: Lattice, points: MapPoints,
+            manifolds: list[ManifoldSummary], mesh: Any | None, *, cut: Cut, phi0: float,
+            attitude: int, title: str = "", r_level: float | None = None,
+            panel_key: Hashable | None = None, table: Table | None = None) -> Any:
+    """The laid-out figure, labels placed (call under `_drawing`; close it when done)."""
     fig = plt.figure(figsize=(12, 5.6))
     ax = fig.add_subplot(1, 2, 1)
     roll = lattice.attitudes[attitude][0]
     where = "z = 0" if cut == "horizontal" else f"vertical plane at φ = {math.degrees(phi0):.0f}°"
     if r_level is not None:
         where += f", r = {r_level * 1000:g} mm"
-    _draw_cut(ax, field, manifolds, lattice, mesh,
-              f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
+    texts, contour_labels, dots = _draw_cut(
+        ax, field, manifolds, lattice, mesh,
+        f"{title} {where}, roll {math.degrees(roll):.0f}°".strip())
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     _draw_3d(ax3, lattice, points, mesh)
     if table is not None:
-        _table_in_cut(ax, field, table)
-        _table_in_3d(ax3, table, float(np.abs(field["X"]).max()))
-    if panel_key is not None and fmt == "png":
+        table_in_cut(ax, field, table)
+        table_in_3d(ax3, table, float(np.abs(field["X"]).max()))
+    if panel_key is not None:
         reuse_panel(ax, ax3, panel_key)
     large = [m for m in manifolds if m.large]
     dust = [m for m in manifolds if not m.large]
@@ -355,10 +346,10 @@ def _figure(field: dict[str, Any], lattice: Lattice, points: MapPoints,
     # tight_layout leaves a placeholder layout engine behind, for which savefig first draws
     # the whole figure once without rendering (~30 % of a render); the layout is done.
     fig.set_layout_engine(None)
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=110)
-    plt.close(fig)
-    return buf.getvalue()
+    ax.set_xlim(ax.get_xlim())  # the placement below must not move the view it measures in
+    ax.set_ylim(ax.get_ylim())
+    place_on_axes(ax, texts, contour_labels, dots, MAXIMUM_PT)
+    return fig
 
 
 def warm_up() -> None:

@@ -39,7 +39,7 @@ def _cached(exploration_id: int, created_at: datetime, spec_json: Any | None,
         spec_json = session.scalar(_SPEC, {"id": exploration_id})
     if spec_json is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
-    spec = ExplorationSpec.model_validate(spec_json)
+    spec = ExplorationSpec.model_validate(spec_json, context={"stored": True})
     with _lock:
         if len(_cache) >= _MAX_CACHED:
             _cache.clear()

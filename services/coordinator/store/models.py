@@ -77,6 +77,20 @@ class ObjectRow(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
+class GripperRow(Base):
+    """A gripper's archive (shared/specs/gripper_archive.py) by its content hash: packed at
+    submit from the coordinator's files, or uploaded (POST /grippers). Kept in the database
+    beside the meshes, for the same reason."""
+
+    __tablename__ = "grippers"
+
+    content_hash: Mapped[str] = mapped_column(String(64), primary_key=True)
+    kind: Mapped[str] = mapped_column(String(8))  # "toml" | "urdf"
+    name: Mapped[str] = mapped_column(String(255))  # the gripper's own name, for people
+    archive: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
 class ExplorationRow(Base):
     __tablename__ = "explorations"
     # SQLite: never reuse the id of a deleted exploration (migration 0006); PostgreSQL's
@@ -105,6 +119,9 @@ class ExplorationRow(Base):
     support_group: Mapped[int | None] = mapped_column(Integer, index=True)
     resting_index: Mapped[int | None] = mapped_column(Integer)
     resting_probability: Mapped[float | None] = mapped_column(Float)
+    # The archive workers fetch the gripper by (grippers.content_hash); null: a shipped
+    # gripper, which every worker has.
+    gripper_hash: Mapped[str | None] = mapped_column(String(64))
 
 
 class TileRow(Base):

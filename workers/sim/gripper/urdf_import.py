@@ -18,7 +18,6 @@ What the rewrite does, in order (docs/howto/add-gripper.md):
 from __future__ import annotations
 
 import hashlib
-import os
 import re
 import warnings
 import xml.etree.ElementTree as ET
@@ -27,7 +26,11 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from graspscape.shared.specs.gripper import UrdfGripperSpec
+from graspscape.shared.specs.gripper import (
+    GripperFileError,
+    UrdfGripperSpec,
+    resolve_inside,
+)
 from graspscape.workers.sim.objects.decompose import params_key, vhacd_parts
 from graspscape.workers.sim.objects.meshio import atomic_write, write_parts_obj
 from scipy.spatial.transform import Rotation
@@ -35,10 +38,6 @@ from scipy.spatial.transform import Rotation
 # A collision mesh whose convex hull holds at most this much more volume is used as its hull.
 CONVEX_VOLUME_RATIO = 1.05
 MOVING = ("revolute", "prismatic", "continuous", "planar", "floating")
-
-
-class GripperFileError(ValueError):
-    """A gripper's files cannot be used as they are; the message says why and what to do."""
 
 
 @dataclass(frozen=True)
@@ -73,30 +72,6 @@ class PreparedUrdf:
 
 
 # --- files --------------------------------------------------------------------------------
-def resolve_inside(folder: Path, filename: str, relative_to: Path | None = None) -> Path:
-    """The file a URDF names, which must lie inside the gripper's folder. `package://PKG/a/b`
-    is looked up as `a/b` and as `PKG/a/b` under the folder, a plain name relative to
-    `relative_to` (the URDF's folder); absolute paths, `..` out of the folder and links
-    pointing out of it are refused."""
-    root = folder.resolve()
-    start = root
-    if filename.startswith("package://"):
-        rest = filename.removeprefix("package://")
-        candidates = [rest.split("/", 1)[1], rest] if "/" in rest else [rest]
-    else:
-        candidates = [filename.removeprefix("file://")]
-        start = (relative_to or root).resolve()
-    for name in candidates:
-        path = (start / name).resolve()
-        if os.path.isabs(name) or not path.is_relative_to(root):
-            raise GripperFileError(
-                f"mesh {filename!r} lies outside the gripper's folder {root}: copy the file "
-                "into the folder and name it relative to it (package:// maps to the folder)")
-        if path.is_file():
-            return path
-    raise GripperFileError(f"mesh {filename!r} is not in the gripper's folder {root}")
-
-
 def _sha(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 

@@ -105,7 +105,8 @@ class Worker:
 
     def __init__(self, endpoint: str, procs: int, name: str, cache_dir: Path,
                  instant: bool = False, tiles_per_request: int = 1,
-                 log_level: str = "info", pose_s: float = 0.0) -> None:
+                 log_level: str = "info", pose_s: float = 0.0, cwd: Path = REPO,
+                 env: dict[str, str] | None = None) -> None:
         self.log_path = cache_dir.parent / f"worker-{name}.log"
         self.log = open(self.log_path, "wb")  # noqa: SIM115
         args = [sys.executable, "-m", "graspscape.services.local.cli", "worker", "--connect",
@@ -118,8 +119,9 @@ class Worker:
             args += ["--instant-pose-s", str(pose_s)]
         if tiles_per_request != 1:
             args += ["--tiles-per-request", str(tiles_per_request)]
-        self.process = subprocess.Popen(args, cwd=REPO, stdout=self.log,
-                                        stderr=subprocess.STDOUT)
+        self.process = subprocess.Popen(args, cwd=cwd, stdout=self.log,
+                                        stderr=subprocess.STDOUT,
+                                        env=None if env is None else {**os.environ, **env})
 
     def output(self) -> str:
         return self.log_path.read_text(errors="replace")

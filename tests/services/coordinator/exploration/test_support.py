@@ -143,7 +143,7 @@ def prepare_cube_mesh():
 
 def test_the_map_picture_draws_the_table(client, named_object, sessions):
     import matplotlib.pyplot as plt
-    from graspscape.services.coordinator.maps.render import _table_in_cut
+    from graspscape.services.coordinator.maps.table import table_in_cut
 
     mug = named_object("mug")
     created = client.post("/explorations", json={"object_id": mug, "grid": COARSE,
@@ -157,7 +157,7 @@ def test_the_map_picture_draws_the_table(client, named_object, sessions):
     grid = np.linspace(-0.1, 0.1, 5)
     field = {"X": np.tile(grid, (5, 1)), "Y": np.tile(grid, (5, 1)).T,
              "e1": np.array([1.0, 0.0, 0.0]), "e2": np.array([0.0, 0.0, 1.0])}
-    _table_in_cut(ax, field, (np.array([0.0, 0.0, 1.0]), 0.04))
+    table_in_cut(ax, field, (np.array([0.0, 0.0, 1.0]), 0.04))
     (line,) = ax.lines
     assert np.allclose(line.get_ydata(), -0.04)
     plt.close(fig)
