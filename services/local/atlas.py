@@ -30,7 +30,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from graspscape.services.coordinator.exploration.object_symmetry import resolve_grid
-from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.exploration.service import create_explorations
+from graspscape.services.coordinator.exploration.support import resting_specs
 from graspscape.services.coordinator.settings import DatabaseSettings, Settings, ZenohSettings
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -42,6 +43,12 @@ from graspscape.services.local.compose import open_store, store_object, wire
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec, RefinementSpec
 from graspscape.shared.specs.object_names import BUILTIN_NAMES
 from graspscape.shared.specs.robustness import TestName
+from graspscape.shared.specs.support import (
+    DEFAULT_TABLE_FRICTION,
+    RestingPose,
+    SupportKind,
+    SupportSpec,
+)
 from graspscape.workers.runtime.config import default_procs
 from pydantic import BaseModel, Field
 from sqlalchemy import select
@@ -65,6 +72,9 @@ class AtlasSetting(BaseModel):
     levels: int = Field(ge=0, le=6)
     robustness: tuple[TestName, ...] = ()
     mesh_mass_kg: float = Field(default=0.2, gt=0, description="mass of loose mesh files")
+    support: SupportKind = Field(default="none", description="'plane': each object on a table, "
+                                 "one map per chosen resting pose (concepts/support.md)")
+    support_friction: float = Field(default=DEFAULT_TABLE_FRICTION, gt=0.0, le=3.0)
 
     def spec(self, object_id: int, object_name: str) -> ExplorationSpec:
         sim = ExplorationSpec(object_id=object_id).settings
@@ -75,6 +85,7 @@ class AtlasSetting(BaseModel):
             refinement=RefinementSpec(levels=self.levels),
             settings=sim.model_copy(update={"robustness": sim.robustness.model_copy(
                 update={"tests": self.robustness})}),
+            support=SupportSpec(kind=self.support, friction=self.support_friction),
             label=f"atlas {self.name}: {object_name}",
         )
 
@@ -112,6 +123,7 @@ class AtlasEntry:
     exploration_id: int
     skipped: bool  # finished before this run
     wall_s: float  # of the exploration (stored start to finish)
+    resting: RestingPose | None = None  # on a table: the object's resting pose
     status: str = ""
     poses: int = 0
     notes: list[str] = field(default_factory=list)
@@ -127,13 +139,30 @@ class AtlasOptions(BaseModel):
     procs: int = Field(default_factory=default_procs, ge=0)
     grid_override_deg: float | None = Field(default=None, gt=0.5, le=90,
                                             description="tests: another Δθ for the setting")
+    support: SupportKind | None = Field(default=None, description="another support than the "
+                                        "setting's: 'plane' maps each object on a table")
+    support_friction: float | None = Field(default=None, gt=0.0, le=3.0)
     pictures: bool = True  # best-grasp pictures in the site (a simulation each)
     quiet: bool = False
 
 
 def _find_or_create(session: Session, spec: ExplorationSpec, settings: Settings
-                    ) -> tuple[int, bool]:
-    """(id, finished before): the newest exploration of this very spec, else a new one."""
+                    ) -> list[tuple[int, bool, RestingPose | None]]:
+    """(id, finished before, resting pose) of each exploration the spec submits (one, or on a
+    plane one per chosen resting pose): the newest of each very spec, else new ones."""
+    specs = resting_specs(session, spec)
+    found = [_find(session, one) for one in specs]
+    if any(f is None for f in found):
+        rows = create_explorations(session, spec=spec,
+                                   tile_target_poses=settings.queue.tile_target_poses,
+                                   max_poses=settings.queue.max_poses_per_exploration)
+        found = [(row.id, False) for row in rows]
+    return [(eid, finished, one.support.resting)
+            for (eid, finished), one in zip(found, specs, strict=True)]  # type: ignore[misc]
+
+
+def _find(session: Session, spec: ExplorationSpec) -> tuple[int, bool] | None:
+    """(id, finished before) of the newest exploration of this very spec, if any."""
     wanted = resolve_grid(session, spec).model_dump(mode="json")
     for row in session.scalars(select(ExplorationRow).order_by(ExplorationRow.id.desc())):
         if row.spec != wanted or row.status == ExplorationStatus.CANCELLED:
@@ -142,10 +171,7 @@ def _find_or_create(session: Session, spec: ExplorationSpec, settings: Settings
             retry_failed_tiles(session, exploration_id=row.id)
             return row.id, False
         return row.id, row.status in FINISHED_STATUSES
-    row = create_exploration(session, spec=spec,
-                             tile_target_poses=settings.queue.tile_target_poses,
-                             max_poses=settings.queue.max_poses_per_exploration)
-    return row.id, False
+    return None
 
 
 def _wait(sessions: sessionmaker[Session], exploration_id: int, poll: Callable[[], None],
@@ -214,6 +240,9 @@ def run_atlas(opts: AtlasOptions) -> int:
     setting = SETTINGS[opts.setting]
     if opts.grid_override_deg is not None:
         setting = setting.model_copy(update={"dtheta_deg": opts.grid_override_deg})
+    for key in ("support", "support_friction"):
+        if getattr(opts, key) is not None:
+            setting = setting.model_copy(update={key: getattr(opts, key)})
     objects_dir = opts.objects_dir.resolve()
     # `ycb:` names resolve here for this process and the worker processes it starts.
     previous = os.environ.get("GRASPSCAPE_YCB_DIR")
@@ -257,17 +286,19 @@ def _run(opts: AtlasOptions, setting: AtlasSetting, objects_dir: Path,
                 mass = setting.mesh_mass_kg if Path(name).suffix.lower() in MESH_SUFFIXES \
                     else None
                 object_id = store_object(session, name, mass_kg=mass)
-                eid, finished = _find_or_create(session, setting.spec(object_id,
-                                                                      short_name(name)),
-                                                settings)
-            say(f"[{i}/{len(names)}] {short_name(name)}: exploration {eid}"
-                + (" (done before, skipped)" if finished else ""))
-            if not finished and workers is not None:
-                workers.start()  # only once something is left to explore
-            row = _wait(sessions, eid, workers.poll if workers else (lambda: None), say)
-            entries.append(AtlasEntry(name=short_name(name), exploration_id=eid,
-                                      skipped=finished, wall_s=_wall_s(row), status=row.status,
-                                      poses=row.poses_done))
+                found = _find_or_create(session, setting.spec(object_id, short_name(name)),
+                                        settings)
+            for eid, finished, resting in found:
+                # On a table, one page per resting pose, as the group's explorations.
+                shown = short_name(name) + ("" if resting is None else f" rest{resting.index}")
+                say(f"[{i}/{len(names)}] {shown}: exploration {eid}"
+                    + (" (done before, skipped)" if finished else ""))
+                if not finished and workers is not None:
+                    workers.start()  # only once something is left to explore
+                row = _wait(sessions, eid, workers.poll if workers else (lambda: None), say)
+                entries.append(AtlasEntry(name=shown, exploration_id=eid, skipped=finished,
+                                          wall_s=_wall_s(row), status=row.status,
+                                          poses=row.poses_done, resting=resting))
     finally:
         if workers is not None:
             workers.stop()

@@ -7,8 +7,9 @@
   atlas3d.js              the viewer's 3D view with three.js as one classic script
   <object>/index.html     the exploration page: numbers, the map cut both ways, the 3D view,
                           the manifold table, the best grasp of each manifold
-  <object>/view3d-data.js the 3D view's data: the mesh (OBJ text) and the viable approach
-                          directions with their manifold labels
+  <object>/view3d-data.js the 3D view's data: the mesh (OBJ text), the viable approach
+                          directions with their manifold labels and, on a table, the
+                          resting pose
   <object>/map-*.png, map.svg, manifolds.json, poses.csv, object.obj, graspgen.json,
   grasp-<label>.png
 
@@ -38,6 +39,7 @@ from graspscape.services.coordinator.web.data import directions
 from graspscape.services.coordinator.web.grasp import grasp_png, has_painter
 from graspscape.services.coordinator.web.router import STATIC_DIR
 from graspscape.services.local.atlas import AtlasEntry, AtlasSetting
+from graspscape.shared.specs.support import RestingPose
 from sqlalchemy.orm import Session, sessionmaker
 
 _KNOWN = {"label", "name", "description", "digits", "pose_count", "evaluated_count",
@@ -108,11 +110,13 @@ def _write_exports(session: Session, eid: int, folder: Path) -> list[str]:
     return written
 
 
-def write_3d_data(session: Session, eid: int, folder: Path, exports: list[str]) -> None:
+def write_3d_data(session: Session, eid: int, folder: Path, exports: list[str],
+                  resting: RestingPose | None = None) -> None:
     """view3d-data.js: one assignment the bundle reads (a script, as file:// allows no fetch)."""
     mesh = (folder / "object.obj").read_text() if "object.obj" in exports else None
     data = {"obj": mesh,
-            "directions": directions(session, eid, MAX_DIRECTIONS).model_dump(mode="json")}
+            "directions": directions(session, eid, MAX_DIRECTIONS).model_dump(mode="json"),
+            "resting": None if resting is None else resting.model_dump(mode="json")}
     # JSON is a JS expression; "</" escaped anyway, should the file ever be inlined in HTML.
     text = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
     (folder / "view3d-data.js").write_text(f"window.GRASPSCAPE_ATLAS_3D = {text};\n")
@@ -151,7 +155,7 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
     table = table_document(session, eid)  # as GET …/export/manifolds.json
     (folder / "manifolds.json").write_text(json.dumps(table, indent=1))
     exports = _write_exports(session, eid, folder)
-    write_3d_data(session, eid, folder, exports)
+    write_3d_data(session, eid, folder, exports, entry.resting)
     dumped = table["manifolds"]
     extra = sorted({k for m in dumped for k, v in m.items()
                     if k not in _KNOWN and not isinstance(v, dict | list)})
@@ -182,7 +186,7 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
              f"{_e(row.status)}</b></li><li>poses <b>{row.poses_done:,}</b></li>"
              f"<li>viable <b>{'–' if viable is None else f'{100 * viable:.1f} %'}</b></li>"
              f"<li>manifolds <b>{len(listed)}</b></li>"
-             f"<li>explored in <b>{entry.wall_s:.0f} s</b></li></ul>")
+             f"<li>explored in <b>{entry.wall_s:.0f} s</b></li>{_on_table(entry)}</ul>")
     links = " ".join(f'<a href="{n}">{n}</a>' for n in ["manifolds.json", "map.svg", *exports])
     body = (f"<h2>{_e(entry.name)}</h2>{facts}"
             '<div class="grid"><section class="panel map"><h3>Horizontal cut</h3>'
@@ -199,7 +203,16 @@ def _object_page(session: Session, entry: AtlasEntry, folder: Path, pictures: bo
     return {"name": entry.name, "exploration_id": eid, "status": row.status,
             "poses": row.poses_done, "viable_share": viable, "manifolds": len(listed),
             "wall_s": entry.wall_s, "skipped": entry.skipped, "folder": folder.name,
-            "eval_time_s_sum": _eval_time(session, eid)}
+            "eval_time_s_sum": _eval_time(session, eid),
+            "resting_index": None if entry.resting is None else entry.resting.index,
+            "resting_probability": None if entry.resting is None else entry.resting.probability}
+
+
+def _on_table(entry: AtlasEntry) -> str:
+    if entry.resting is None:
+        return ""
+    return (f'<li data-field="resting">on a table, resting pose <b>{entry.resting.index}</b> '
+            f"(probability <b>{100 * entry.resting.probability:.0f} %</b>)</li>")
 
 
 def _eval_time(session: Session, eid: int) -> float:
@@ -233,7 +246,9 @@ def write_site(sessions: sessionmaker[Session], entries: list[AtlasEntry], out: 
     described = (f"Δθ {setting.dtheta_deg:g}°, r {setting.r_min:g}–{setting.r_max:g} m in "
                  f"steps of {setting.dr:g} m, {setting.rolls} roll(s), {setting.levels} "
                  f"refinement level(s), robustness tests: "
-                 f"{', '.join(setting.robustness) or 'none'}")
+                 f"{', '.join(setting.robustness) or 'none'}"
+                 + ("; each object on a table, one map per resting pose"
+                    if setting.support == "plane" else ""))
     body = (f"<h2>Atlas: {len(summaries)} objects</h2>"
             f'<p class="note">Setting <b>{_e(setting.name)}</b>: {_e(described)}; gripper '
             "robotiq_3f, policy baseline.</p>" + table)

@@ -87,7 +87,8 @@ def _atlas(args: argparse.Namespace) -> int:
     given = {"setting": args.setting, "objects_dir": args.objects_dir,
              "only": tuple(args.only or ()),
              "data_dir": args.data_dir, "out": args.out, "database_url": args.database_url,
-             "procs": args.procs, "pictures": not args.no_pictures, "quiet": args.quiet}
+             "procs": args.procs, "pictures": not args.no_pictures, "quiet": args.quiet,
+             "support": args.support, "support_friction": args.support_friction}
     return run_atlas(AtlasOptions(**{k: v for k, v in given.items() if v is not None}))
 
 
@@ -107,6 +108,7 @@ def _register_atlas(subparsers: argparse._SubParsersAction) -> None:
     atlas.add_argument("--only", action="append", metavar="NAME",
                        help="only this object (repeatable), e.g. mug or ycb:YcbBanana")
     atlas.add_argument("--out", type=Path, help="site folder (default atlas)")
+    cli_args.add_support(atlas)
     cli_args.add_store(atlas, data_dir_default="atlas-data")
     cli_args.add_procs(atlas, "local worker processes (default: cores; 0: none, the workers "
                        "of the coordinator whose --database-url is given)", low=0)

@@ -23,7 +23,7 @@ from graspscape.services.local.atlas import (
     run_atlas,
 )
 from graspscape.services.local.cli import build_parser
-from graspscape.services.local.compose import store_object
+from graspscape.services.local.compose import store_object, wire
 from graspscape.shared.specs.object_names import BUILTIN_NAMES, ycb_root
 from sqlalchemy.orm import Session
 
@@ -53,16 +53,37 @@ def test_finished_exploration_is_skipped_unfinished_resumed(session: Session,
     settings = Settings(database={"url": "sqlite://", "data_dir": tmp_path})
     object_id = store_object(session, "sphere")
     spec = SETTINGS["reduced"].spec(object_id, "sphere")
-    first, finished = _find_or_create(session, spec, settings)
-    assert not finished
-    again, finished = _find_or_create(session, spec, settings)
+    [(first, finished, resting)] = _find_or_create(session, spec, settings)
+    assert not finished and resting is None
+    [(again, finished, _)] = _find_or_create(session, spec, settings)
     assert (again, finished) == (first, False)  # unfinished: resumed, not created twice
     row = session.get(ExplorationRow, first)
     row.status = "done"
     session.commit()
-    assert _find_or_create(session, spec, settings) == (first, True)
+    assert _find_or_create(session, spec, settings) == [(first, True, None)]
     other = SETTINGS["full"].spec(object_id, "sphere")
-    assert _find_or_create(session, other, settings)[0] != first  # another setting: new
+    assert _find_or_create(session, other, settings)[0][0] != first  # another setting: new
+
+
+def test_on_a_table_one_exploration_per_resting_pose_found_again(session: Session,
+                                                                 tmp_path: Path) -> None:
+    settings = Settings(database={"url": "sqlite://", "data_dir": tmp_path})
+    wire()  # the workers' object preparation: the cube's mesh, for its resting poses
+    cube = store_object(session, "cube")
+    setting = SETTINGS["reduced"].model_copy(update={"support": "plane"})
+    spec = setting.spec(cube, "cube")
+    assert spec.support.kind == "plane"
+    group = _find_or_create(session, spec, settings)
+    # A cube rests on any of its six faces alike: the four most probable are explored.
+    assert len(group) == 4
+    assert [resting.index for _, _, resting in group] == [0, 1, 2, 3]
+    rows = [session.get(ExplorationRow, eid) for eid, _, _ in group]
+    assert {row.support_group for row in rows} == {group[0][0]}
+    assert _find_or_create(session, spec, settings) == group  # found again, not created
+    free = SETTINGS["reduced"].spec(cube, "cube")
+    assert _find_or_create(session, free, settings)[0][0] not in {eid for eid, _, _ in group}
+    args = build_parser().parse_args(["atlas", "--support", "plane", "--only", "cube"])
+    assert args.support == "plane"
 
 
 @pytest.mark.slow
@@ -108,3 +129,27 @@ def test_two_objects_tiny_grid_site_from_disk(tmp_path: Path) -> None:
         [o["exploration_id"] for o in site["objects"]]
     assert time.monotonic() - started < 300
     assert os.environ.get("GRASPSCAPE_YCB_DIR") == ycb_env  # restored after the run
+
+
+@pytest.mark.slow
+def test_cube_on_a_table_one_page_per_resting_pose(tmp_path: Path) -> None:
+    opts = AtlasOptions(objects_dir=tmp_path, only=("cube",), data_dir=tmp_path / "data",
+                        out=tmp_path / "site", procs=1, grid_override_deg=90, support="plane",
+                        pictures=False)
+    assert run_atlas(opts) == 0
+    site = json.loads((tmp_path / "site" / "atlas.json").read_text())
+    assert site["setting"]["support"] == "plane"
+    objects = site["objects"]
+    assert [o["name"] for o in objects] == [f"cube rest{k}" for k in range(4)]
+    assert [o["resting_index"] for o in objects] == [0, 1, 2, 3]
+    assert sum(o["resting_probability"] for o in objects) == pytest.approx(4 / 6, abs=0.1)
+    for o in objects:
+        assert o["status"] == "done" and o["poses"] > 0
+        page = (tmp_path / "site" / o["folder"] / "index.html").read_text()
+        assert 'data-field="resting"' in page
+        data = read_data(tmp_path / "site" / o["folder"] / "view3d-data.js")
+        # The 3D view's table: the cube (6 cm) rests with its centre 3 cm above it.
+        assert data["resting"]["index"] == o["resting_index"]
+        assert data["resting"]["position"][2] == pytest.approx(0.03, abs=1e-3)
+    index = (tmp_path / "site" / "index.html").read_text()
+    assert "on a table" in index and 'href="cube_rest0/index.html"' in index

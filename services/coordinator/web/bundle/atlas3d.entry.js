@@ -3,7 +3,8 @@
 // load no ES module from file://. The page loads its object's data first as another classic
 // script (view3d-data.js, written by services/local/atlas_site.py):
 //   window.GRASPSCAPE_ATLAS_3D = {obj: "<OBJ text>" | null, directions: {pose_id, theta, phi,
-//                                 r, mu_s, label, total_viable}}
+//                                 r, mu_s, label, total_viable},
+//                                 resting: {position, quaternion, …} | null (on a table)}
 // and holds #view3d (canvas), #legend3d and #picked3d.
 import { View3D } from "../static/view3d.js";
 import { TAB10, labelName } from "../static/palette.js";
@@ -51,6 +52,7 @@ function start() {
       (_poseId, i) => show(picked, data.directions, i));
     view.pickShows = "numbers";
     if (data.obj) view.loadMesh(data.obj);
+    if (data.resting) view.loadTable(data.resting);
     view.loadDirections(data.directions);
     canvas.dataset.ready = "1";
   } catch (err) {

@@ -365,6 +365,9 @@ async function viewExploration(id) {
         const res = await fetch(`/explorations/${id}/export/object.obj`);
         if (!res.ok) throw new Error(`object mesh: ${res.status}`);
         view.loadMesh(await res.text());
+        // On a table, the object at its resting pose above the table (concepts/support.md).
+        const resting = detail.spec.support && detail.spec.support.resting;
+        if (resting) view.loadTable(resting);
       }
       await view.loadDirections(await getJSON(`/web/explorations/${id}/directions`));
     } catch (err) { legend.textContent = `3D view unavailable: ${err.message || err}`; }

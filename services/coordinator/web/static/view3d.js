@@ -1,6 +1,7 @@
 // The 3D view of one exploration: the object's mesh (its COM frame, as exported) and a marker
 // per viable approach direction, coloured by manifold like the map pictures. Drag or arrow
-// keys rotate, wheel or +/− zoom; clicking a marker shows that pose's grasp.
+// keys rotate, wheel or +/− zoom; clicking a marker shows that pose's grasp. An object on a table
+// is drawn at its resting pose above a translucent table (loadTable).
 // The live viewer loads this module as it is ("three" through the page's import map); the
 // static atlas gets it bundled with three.js into one classic script (bundle/build.mjs), as
 // browsers load no module from file://. So: relative imports, and no fetch in here.
@@ -42,7 +43,12 @@ export class View3D {
     const sun = new THREE.DirectionalLight(0xffffff, 1.5);
     sun.position.set(1, -1, 2);
     this.scene.add(sun);
-    this.scene.add(new THREE.AxesHelper(0.05));
+    // The object, its axes and the markers, in the object frame; turned to the resting pose
+    // when the object lies on a table (loadTable), so that the table stays level.
+    this.content = new THREE.Group();
+    this.content.add(new THREE.AxesHelper(0.05));
+    this.scene.add(this.content);
+    this.table = null;
     this.controls = new OrbitControls(this.camera, canvas);
     this.controls.addEventListener("change", () => this.render());
     canvas.addEventListener("keydown", (e) => this.key(e));
@@ -86,7 +92,7 @@ export class View3D {
     const obj = new OBJLoader().parse(text);
     const material = new THREE.MeshStandardMaterial({ color: 0x9a9a9a, roughness: 0.7, flatShading: true });
     obj.traverse((child) => { if (child.isMesh) child.material = material; });
-    this.scene.add(obj);
+    this.content.add(obj);
     const sphere = new THREE.Box3().setFromObject(obj).getBoundingSphere(new THREE.Sphere());
     this.radius = Math.max(sphere.radius, 0.01);
     this.camera.position.set(3 * this.radius, -3 * this.radius, 2 * this.radius);
@@ -98,7 +104,7 @@ export class View3D {
   }
 
   loadDirections(d) {
-    if (this.points) this.scene.remove(this.points);
+    if (this.points) this.content.remove(this.points);
     const n = d.pose_id.length;
     const positions = new Float32Array(3 * n);
     const colors = new Float32Array(3 * n);
@@ -120,13 +126,33 @@ export class View3D {
     const material = new THREE.PointsMaterial({ size: this.radius / 12, vertexColors: true });
     this.points = new THREE.Points(geometry, material);
     this.poseIds = d.pose_id;
-    this.scene.add(this.points);
+    this.content.add(this.points);
     this.render();
     const parts = [...counts.entries()].sort((a, b) => a[0] - b[0]).slice(0, 12)
       .map(([label, k]) => `${label >= 0 ? this.labelName(label) : "none"}: ${k}`);
     this.legend.textContent = `${n} of ${d.total_viable} viable poses shown (${parts.join(", ")}). ` +
       `Drag or arrow keys rotate, wheel or +/− zoom, click a marker for its ${this.pickShows}.`;
     this.canvas.dataset.points = String(n);
+  }
+
+  // The table under an object at rest on it. `resting` is spec.support.resting: the object
+  // frame (centre of mass, object axes) in the table frame, position and quaternion (x, y, z,
+  // w). The view's origin stays the centre of mass: the object is turned to its resting pose
+  // and the table is the level plane z = -height, a square wide enough for every marker.
+  loadTable(resting) {
+    const [x, y, z, w] = resting.quaternion;
+    this.content.quaternion.set(x, y, z, w);
+    const [px, py, height] = resting.position;
+    if (this.table) this.scene.remove(this.table);
+    const side = 2 * (1.2 * this.radius + 0.12);
+    const material = new THREE.MeshStandardMaterial({ color: 0x8c6d46, roughness: 0.9,
+      transparent: true, opacity: 0.35, side: THREE.DoubleSide, depthWrite: false });
+    this.table = new THREE.Mesh(new THREE.PlaneGeometry(side, side), material);
+    this.table.name = "table";
+    this.table.position.set(-px, -py, -height);
+    this.scene.add(this.table);
+    this.canvas.dataset.table = height.toFixed(4);
+    this.render();
   }
 
   pick(e) {

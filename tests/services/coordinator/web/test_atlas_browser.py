@@ -1,7 +1,8 @@
 """The static atlas site in headless Chromium, opened from disk (file://, no server): the
 object page's 3D view draws the object's mesh and its viable approach directions in the
-manifolds' colours, turns with the keyboard, shows a marker's numbers on a click, and no page
-logs a console error (a script that did not load is one)."""
+manifolds' colours, turns with the keyboard, shows a marker's numbers on a click, draws the
+table under an object at rest on one, and no page logs a console error (a script that did not
+load is one)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import pytest
 from graspscape.services.local.atlas import SETTINGS, AtlasEntry
 from graspscape.services.local.atlas_site import write_site
 from graspscape.services.local.compose import open_store, wire
+from graspscape.shared.specs.support import RestingPose
 
 from tests.services.coordinator.web.live import ConsoleLog
 from tests.services.local.test_atlas_site import oracle_sphere, read_data
@@ -112,3 +114,30 @@ def test_site_pages_load_every_file_from_disk(site: Path, page: tuple[Any, Conso
     assert failed == [] and console.errors == []
     assert any(u.endswith("/atlas3d.js") for u in urls)
     assert all(u.startswith(("file://", "data:")) for u in urls), urls
+
+
+def test_object_on_a_table_draws_the_table(tmp_path: Path, page: tuple[Any, ConsoleLog]) -> None:
+    p, console = page
+    wire()
+    engine, sessions = open_store(f"sqlite:///{tmp_path / 'atlas.db'}")
+    try:
+        eid = oracle_sphere(sessions, dtheta_deg=90)
+        # The sphere (4 cm radius) at rest: its centre 4 cm above the table, turned a quarter.
+        resting = RestingPose(index=0, probability=1.0, position=(0.0, 0.0, 0.04),
+                              quaternion=(0.0, 0.7071068, 0.0, 0.7071068))
+        entries = [AtlasEntry(name="sphere rest0", exploration_id=eid, skipped=False,
+                              wall_s=1.0, resting=resting),
+                   AtlasEntry(name="sphere", exploration_id=eid, skipped=False, wall_s=1.0)]
+        index = write_site(sessions, entries, tmp_path / "site", SETTINGS["reduced"],
+                           pictures=False)
+    finally:
+        engine.dispose()
+    p.goto((index.parent / "sphere_rest0" / "index.html").as_uri())
+    canvas = p.locator("#view3d[data-ready='1']")
+    canvas.wait_for()
+    assert canvas.get_attribute("data-table") == "0.0400"
+    assert "resting pose 0" in p.locator("[data-field=resting]").inner_text()
+    p.goto((index.parent / "sphere" / "index.html").as_uri())
+    p.locator("#view3d[data-ready='1']").wait_for()
+    assert p.locator("#view3d").get_attribute("data-table") is None
+    assert console.errors == []

@@ -66,10 +66,17 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
         queued = create_exploration(s, spec=ExplorationSpec(object_id=obj, label="waiting",
                                                             **spec),
                                     tile_target_poses=50, max_poses=10**6).id
+        # The sphere on a table: one resting pose, queued (the 3D view needs no poses).
+        table = create_exploration(s, spec=ExplorationSpec(
+            object_id=obj, label="on a table", support={"kind": "plane"}, **spec),
+            tile_target_poses=50, max_poses=10**6)
+        table_height = table.spec["support"]["resting"]["position"][2]
+        table = table.id
     settings = Settings(database={"url": url, "data_dir": folder},
                         api={"token": None}, queue={"requeue_interval_s": 3600})
     with serving(create_app(settings), start_timeout_s=60) as base:
-        yield {"base": base, "done": done, "queued": queued}
+        yield {"base": base, "done": done, "queued": queued, "table": table,
+               "table_height": table_height}
         engine.dispose()
 
 
@@ -140,6 +147,21 @@ def test_no_eta_when_finished_or_not_yet_estimable(served, page) -> None:
     row = p.get_by_test_id(f"exploration-{served['done']}")
     row.wait_for()
     assert row.locator("[data-field=eta]").inner_text() == "–"
+    assert console.errors == []
+
+
+def test_the_3d_view_draws_the_table_only_on_a_table(served, page) -> None:
+    p, console = page
+    _open(p, served, "table")
+    canvas = p.locator("#view3d[data-table]")
+    canvas.wait_for()
+    # The table's plane lies its resting height under the centre of mass (a sphere: its radius).
+    assert float(canvas.get_attribute("data-table")) == pytest.approx(
+        served["table_height"], abs=1e-4)
+    assert served["table_height"] == pytest.approx(0.04, abs=2e-3)
+    _open(p, served, "done")
+    p.locator("#view3d[data-points]").wait_for()
+    assert p.locator("#view3d").get_attribute("data-table") is None
     assert console.errors == []
 
 
