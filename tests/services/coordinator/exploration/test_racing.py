@@ -41,4 +41,5 @@ def test_race_round_plans_each_chosen_candidate_to_its_next_look() -> None:
     # the leader to 24 draws; the refuted one gets nothing
     assert planned == [((0,), list(seqs[(0,)][12:24]))]
     assert racing.best(cands).point == (0,)
-    assert racing.simulated(model) and not racing.simulated(UncertaintyModel(preset="field"))
+    drawn = racing.race_draws(cands)
+    assert [i for i, _ in drawn[0][1]] == list(range(12, 24))
