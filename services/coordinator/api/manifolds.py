@@ -280,7 +280,8 @@ def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
     steps = 1 << coarser
     out = BestOut(
         exploration_id=exploration_id, manifold=manifold,
-        rank=(ranking.DEFAULT_RANK if rank == ranking.Rank.POINT or engines else rank).value,
+        rank=(ranking.Rank.P_SUCCESS if engines else ranking.DEFAULT_RANK
+              if rank == ranking.Rank.POINT else rank).value,
         delta_steps=steps,
         delta_deg=math.degrees(lattice.dtheta(lattice.depth)) * steps,
         delta_mm=lattice.dr(lattice.depth) * 1000.0 * steps,

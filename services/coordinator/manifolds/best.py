@@ -126,8 +126,10 @@ def best_poses(
     here over the stored samples (`robust_scores`). With `engines`, only the poses whose
     draws were simulated and counted in each of them, by P(success)."""
     rank = Rank(rank)
-    if rank == Rank.POINT or engines:
+    if rank == Rank.POINT:
         rank = DEFAULT_RANK
+    if engines:
+        rank = Rank.P_SUCCESS
     if rank == Rank.P_SUCCESS:
         est = None if not engines else confirmed(estimates(session, exploration_id), engines)
         return _best_p_success(session, exploration_id, label=label, cone_axis=cone_axis,

@@ -140,7 +140,7 @@ class TileRow(Base):
     # and each pose's friction, mass and effort scales (wire TileSample); its poses are
     # evaluated outcome only. `needs_engines`: those engines sorted and comma-joined, which a
     # lease compares with the sets of engines the asking worker runs. NULL for other tiles.
-    sample: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    sample: Mapped[dict[str, Any] | None] = mapped_column(JSON(none_as_null=True), nullable=True)
     needs_engines: Mapped[str | None] = mapped_column(String(64), nullable=True)
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     last_error: Mapped[str | None] = mapped_column(Text)
@@ -282,7 +282,7 @@ class PoseRow(Base):
     # A draw's record (PoseResult.sample, migration 0017): its scales, outcome and links in
     # contact per engine, and the fields an outcome-only evaluation leaves out (μs stored as 0
     # there is no μs). NULL for every evaluation that is not a draw.
-    sample: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    sample: Mapped[dict[str, Any] | None] = mapped_column(JSON(none_as_null=True), nullable=True)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
