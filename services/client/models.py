@@ -106,6 +106,7 @@ class Success(_Answer):
     lower: float
     upper: float
     certified: bool
+    engines: list[str] = []
 
 
 class Pose(_Answer):
@@ -151,6 +152,7 @@ class Best(_Answer):
     delta_mm: float
     uncertainty: dict[str, Any] = {}
     level: float = 0.9
+    engines: list[str] | None = None
     poses: list[Pose]
 
 
