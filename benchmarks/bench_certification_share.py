@@ -30,15 +30,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from graspscape.services.coordinator import db  # noqa: E402
-from graspscape.services.coordinator.exploration.certify_store import (  # noqa: E402
+from graspscape.services.coordinator import db
+from graspscape.services.coordinator.exploration.certify_store import (
     certification_plans,
 )
-from graspscape.services.coordinator.exploration.specs import spec_of  # noqa: E402
-from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow  # noqa: E402
-from sqlalchemy import select  # noqa: E402
+from graspscape.services.coordinator.exploration.specs import spec_of
+from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
+from sqlalchemy import select
 
-from benchmarks._results import write_results  # noqa: E402
+from benchmarks._results import write_results
 
 TARGET = 0.40
 
