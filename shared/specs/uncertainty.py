@@ -70,10 +70,11 @@ class UncertaintyModel(BaseModel):
     mass_scale: Range = Field(default=(1.0, 1.0), description="object mass × uniform [lo, hi]")
     effort_scale: Range = Field(default=(1.0, 1.0),
                                 description="hand closing effort × uniform [lo, hi]")
-    engines: tuple[EngineName, ...] = Field(
-        default=("pybullet",), min_length=1, max_length=4,
+    engines: tuple[EngineName, ...] | None = Field(
+        default=None, min_length=1, max_length=4,
         description="physics engines each draw is simulated in: it succeeds only where it "
-        "holds with the grasp type in every one (the claim holds for these only)")
+        "holds with the grasp type in every one (the claim holds for these only); null: the "
+        "exploration's engine")
 
     @model_validator(mode="before")
     @classmethod
@@ -89,11 +90,12 @@ class UncertaintyModel(BaseModel):
         _check_range("friction_scale", self.friction_scale, 0.05, 2.0)
         _check_range("mass_scale", self.mass_scale, 0.1, 10.0)
         _check_range("effort_scale", self.effort_scale, 0.1, 2.0)
-        if len(set(self.engines)) != len(self.engines):
-            raise ValueError(f"engines {self.engines} lists one twice")
+        engines = self.engines or ()
+        if len(set(engines)) != len(engines):
+            raise ValueError(f"engines {engines} lists one twice")
         scaled = any(r != (1.0, 1.0) for r in (self.friction_scale, self.mass_scale,
                                                self.effort_scale))
-        if (scaled or len(self.engines) > 1) and not (self.position_mm or self.orientation_deg):
+        if (scaled or len(engines) > 1) and not (self.position_mm or self.orientation_deg):
             # A draw is stored under its start pose's key: with no pose error every draw
             # would be the centre itself.
             raise ValueError("scales or several engines need a pose error (position_mm or "
@@ -116,7 +118,7 @@ class UncertaintyModel(BaseModel):
                                ("effort", self.effort_scale)):
             if (lo, hi) != (1.0, 1.0):
                 parts.append(f"{name} ×{lo:g}–{hi:g}")
-        if self.engines != ("pybullet",):
+        if self.engines and self.engines != ("pybullet",):
             parts.append("held in " + " and ".join(self.engines))
         return ", ".join(parts)
 

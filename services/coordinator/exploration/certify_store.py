@@ -167,7 +167,7 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
             tile_level=lattice.depth, round=round_,
             reason=certify.CLAIM_REASON if w.claim
             else certify.reason_for(ids[samples[w.centre].key]),
-            draw_engines=tuple(spec.uncertainty.engines) if drawn else None,
+            draw_engines=spec.draw_engines() if drawn else None,
             draw_scales=w.scales if drawn else None))
     return out
 
@@ -198,7 +198,7 @@ def _candidates(session: Session, exploration_id: int, spec: ExplorationSpec,
                                  racing.success.LOOKS[-1]) for p in points}
     stored = stored_by_key(session, exploration_id, [q.key() for s in seqs.values() for q in s])
     return racing.assess(points, samples, seqs.__getitem__, stored,
-                         level=spec.certification.level, engines=spec.uncertainty.engines)
+                         level=spec.certification.level, engines=spec.draw_engines())
 
 
 def _labels_at(computed: ComputedMap) -> dict[Point, int]:

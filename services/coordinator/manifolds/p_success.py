@@ -72,7 +72,7 @@ def estimates(session: Session, exploration_id: int,
         seqs[s.key] = (s, draws.draw_poses(s, spec.uncertainty, radius, success.LOOKS[-1]))
     keys_drawn = [q.key() for _, seq in seqs.values() for q in seq]
     stored = stored_by_key(session, exploration_id, keys_drawn)
-    level, engines = spec.certification.level, spec.uncertainty.engines
+    level, engines = spec.certification.level, spec.draw_engines()
     out = {}
     for key, (centre, seq) in seqs.items():
         e = success.estimate(draws.outcomes(centre, seq, stored, engines), level=level)
