@@ -3,7 +3,7 @@
 (outcome only, each pose's scales); the evaluation stores them as draw records with no μs,
 whose outcome and grasp type are a full evaluation's of the same start pose; under a model
 listing both engines every draw is simulated in both, and /best can ask for grasps
-confirmed in both."""
+confirmed in both; draws are never returned as grasps."""
 
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def _draws(sessions, eid: int) -> list[PoseRow]:
 
 @pytest.mark.slow  # a ~100-pose exploration and its draws, then 6 full evaluations
 def test_draws_are_evaluated_outcome_only_and_agree_with_full_evaluations(
-        sessions, named_object) -> None:
+        sessions, named_object, client) -> None:
     eid, spec = _explore(sessions, named_object("sphere"), {"preset": "lab"})
     rows = _draws(sessions, eid)
     assert len(rows) >= 12  # the race's first look at least
@@ -61,6 +61,12 @@ def test_draws_are_evaluated_outcome_only_and_agree_with_full_evaluations(
         assert row.sample is not None and "mu_s" in row.sample["absent"]
         assert row.mu_s == 0.0 and row.signature is None and row.grasp is None
         assert list(row.sample["engines"]) == ["pybullet"]
+    # The poses export names them draws (their μs of 0 is no measurement); /best skips them.
+    table = client.get(f"/explorations/{eid}/export/poses.csv").text.splitlines()
+    source = {line.split(",")[0]: line for line in table[1:]}
+    assert all(",draw," in source[row.pose_key] for row in rows)
+    best = client.get(f"/explorations/{eid}/best?rank=mu_s&limit=100").json()["poses"]
+    assert not {p["pose_key"] for p in best} & {row.pose_key for row in rows}
     for row in rows[:6]:
         pose = Pose(theta=row.theta, phi=row.phi, r=row.r, roll=row.roll, pitch=row.pitch,
                     yaw=row.yaw)
