@@ -92,11 +92,12 @@ def _status(args: argparse.Namespace) -> int:
 def _best(args: argparse.Namespace) -> int:
     with _client(args) as api:
         best = api.best(args.exploration_id, manifold=args.manifold, limit=args.limit,
-                        rank=args.rank)
+                        rank=args.rank, engines=args.engines)
     if args.json:
         print(best.model_dump_json(indent=2))
         return 0
-    print(f"best by {best.rank} (δ {best.delta_deg:.1f}°, {best.delta_mm:.1f} mm):")
+    held_in = f", held in {' and '.join(best.engines)}" if best.engines else ""
+    print(f"best by {best.rank} (δ {best.delta_deg:.1f}°, {best.delta_mm:.1f} mm{held_in}):")
     for p in best.poses:
         e = p.success
         chance = (f", P(success) {e.k}/{e.n}, 95 % bounds [{e.lower:.2f}, {e.upper:.2f}]"
@@ -152,6 +153,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     best.add_argument("--limit", type=cli_args.bounded("(poses)", 1, 100, integer=True),
                       default=1, help="how many (default 1)")
     best.add_argument("--rank", help="what ranks them (GET /best's rank; default p_success)")
+    best.add_argument("--engines", help="only grasps whose P(success) draws held in each of "
+                      "these engines, comma-separated (e.g. pybullet,mujoco)")
     best.add_argument("--json", action="store_true", help="print the answer as JSON")
     cli_args.add_remote(best)
     best.set_defaults(handler=_best)

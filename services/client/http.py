@@ -179,8 +179,8 @@ class Client:
     def best(self, exploration_id: int, *, manifold: str | None = None, limit: int = 1,
              rank: str | None = None, **constraints: Any) -> Best:
         """The best grasps; constraints as GET …/best's query (cone_x, cone_y, cone_z,
-        cone_half_angle_deg, max_effort_nm, pose_error_mm, pose_error_deg; on a table,
-        resting=k for the group's exploration at resting pose k)."""
+        cone_half_angle_deg, max_effort_nm, pose_error_mm, pose_error_deg, engines; on a
+        table, resting=k for the group's exploration at resting pose k)."""
         return self._get(f"/explorations/{exploration_id}/best", Best, manifold=manifold,
                          limit=limit, rank=rank, **constraints)
 

@@ -117,6 +117,7 @@ class Success(_Answer):
     lower: float
     upper: float
     certified: bool
+    engines: list[str] = []
 
 
 class Pose(_Answer):
@@ -162,6 +163,7 @@ class Best(_Answer):
     delta_mm: float
     uncertainty: dict[str, Any] = {}
     level: float = 0.9
+    engines: list[str] | None = None
     poses: list[Pose]
 
 

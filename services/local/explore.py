@@ -89,6 +89,8 @@ class ExploreOptions(BaseModel):
     uncertainty: Literal["none", "lab", "field"] = "lab"
     support: SupportKind = "none"
     support_friction: float | None = Field(default=None, gt=0.0, le=3.0)
+    draw_engines: tuple[EngineName, ...] | None = Field(
+        default=None, description="engines each P(success) draw runs in; None: pybullet")
 
 
 def _free_port() -> int:
@@ -216,7 +218,8 @@ def _spec(opts: ExploreOptions) -> ExplorationSpec:
         grid=PoseGridSpec(dtheta=math.radians(opts.dtheta_deg), r_min=opts.r_min,
                           r_max=opts.r_max, dr=opts.dr, attitudes={"rolls": opts.rolls}),
         refinement=RefinementSpec(levels=opts.levels),
-        uncertainty=UncertaintyModel(preset=opts.uncertainty),
+        uncertainty=UncertaintyModel(preset=opts.uncertainty, **(
+            {"engines": opts.draw_engines} if opts.draw_engines else {})),
         label=f"graspscape explore {opts.object}",
         support=SupportSpec(kind=opts.support, **({} if opts.support_friction is None else
                                                   {"friction": opts.support_friction})),
@@ -335,6 +338,13 @@ def _report(sessions: sessionmaker[Session], data_dir: Path, exploration_id: int
 
 
 def run_explore(opts: ExploreOptions) -> int:
+    from graspscape.workers.sim.engine import available_engines
+
+    missing = sorted(set(opts.draw_engines or ()) - set(available_engines()))
+    if missing:  # its draws would wait for a worker that never comes
+        print(f"graspscape explore: --draw-engines {', '.join(missing)}: not installed here",
+              file=sys.stderr)
+        return 1
     data_dir = opts.data_dir.resolve()
     data_dir.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{_free_port()}"

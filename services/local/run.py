@@ -7,6 +7,8 @@ results may arrive in several partial batches, so that one spec can be driven th
 interleavings (what different numbers of real workers would produce). Evaluations go through
 `evaluate`, by default pybullet in this process or in a process pool; it gets a tile's poses
 and, when the exploration asks for shortcut 2, its tolerance (what a worker's lease carries).
+A tile of draws (wire TileSample) goes to `draw` where given (`drawer`: outcome only, as a
+worker runs it), else to `evaluate` like any other tile.
 """
 
 from __future__ import annotations
@@ -27,9 +29,11 @@ from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import PoseResult
 from graspscape.shared.specs.sim import SimSettings
+from graspscape.shared.wire.messages import TileSample
 from sqlalchemy.orm import Session, sessionmaker
 
 Evaluate = Callable[[Sequence[Pose], ConfigurationMatch | None], list[PoseResult]]
+Draw = Callable[[Sequence[Pose], TileSample], list[PoseResult]]
 
 
 @dataclass
@@ -58,6 +62,26 @@ def _eval_normal(args: tuple[list[Pose], ObjectSpec, str, SimSettings, Configura
     donors = DonorPool(match)
     return [evaluate_pose(p, obj=obj, gripper=gripper, settings=settings, donors=donors)
             for p in poses]
+
+
+def _draw_one(args: tuple[Pose, ObjectSpec, str, SimSettings, TileSample]) -> PoseResult:
+    from graspscape.workers.sim.samples import sample_result
+
+    pose, obj, gripper, settings, tile = args
+    return sample_result(pose, obj=obj, gripper=gripper, settings=settings,
+                         engines=list(tile.engines), scales=tile.scales.get(pose.key()))
+
+
+def drawer(obj: ObjectSpec, gripper: str = "robotiq_3f", settings: SimSettings | None = None,
+           *, pool: Executor | None = None) -> Draw:
+    """Evaluate a tile of draws outcome only, in each of its engines (in a pool if given)."""
+    settings = settings or SimSettings()
+
+    def run(poses: Sequence[Pose], tile: TileSample) -> list[PoseResult]:
+        args = [(p, obj, gripper, settings, tile) for p in poses]
+        return list(pool.map(_draw_one, args) if pool is not None else map(_draw_one, args))
+
+    return run
 
 
 def pybullet_evaluator(
@@ -110,6 +134,8 @@ def run_local(
     split: int = 1,
     max_tiles: int = 100_000,
     evaluators: Mapping[int, Evaluate] | None = None,
+    draw: Draw | None = None,
+    engines: Sequence[str] = ("pybullet",),
 ) -> RunStats:
     """Drive every queued tile to done. `split` > 1 sends each tile's results in that many
     batches (the last one final); batches of all leased tiles are shuffled by `seed`.
@@ -125,7 +151,8 @@ def run_local(
         with sessions() as session:
             for w in range(workers):
                 leased += [(f"local-{w}", t) for t in
-                           lease_tiles(session, worker_id=f"local-{w}", n=1, lease_seconds=3600)]
+                           lease_tiles(session, worker_id=f"local-{w}", n=1,
+                                                   lease_seconds=3600, engines=engines)]
         if not leased:
             break
         with sessions() as session:
@@ -136,8 +163,11 @@ def run_local(
         batches = []
         for worker, tile in leased:
             t0 = time.perf_counter()
-            results = evaluators.get(tile.exploration_id, evaluate)(
-                tile.poses(), matches.get(tile.exploration_id))
+            if tile.sample is not None and draw is not None:
+                results = draw(tile.poses(), tile.sample)
+            else:
+                results = evaluators.get(tile.exploration_id, evaluate)(
+                    tile.poses(), matches.get(tile.exploration_id))
             stats.eval_s += time.perf_counter() - t0
             stats.evaluated += len(results)
             order = list(results)

@@ -416,3 +416,8 @@ class ExplorationSpec(BaseModel):
             raise ValueError(
                 f"unknown policy {settings.policy_name!r}; known: {', '.join(known)}")
         return settings
+
+    def draw_engines(self) -> tuple[str, ...]:
+        """The engines each P(success) draw is simulated in: the uncertainty model's, else
+        the exploration's own."""
+        return self.uncertainty.engines or (self.settings.engine,)

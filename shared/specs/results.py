@@ -104,6 +104,46 @@ class RobustnessReport(BaseModel):
         "it never does), s")
 
 
+class DrawScales(BaseModel):
+    """A draw's scales of the uncertainty model (shared/specs/uncertainty.py): the object's
+    friction coefficient and mass and the hand's closing effort, each × this."""
+
+    model_config = _FINITE
+
+    friction: float = Field(default=1.0, ge=0.05, le=2.0)
+    mass: float = Field(default=1.0, ge=0.1, le=10.0)
+    effort: float = Field(default=1.0, ge=0.1, le=2.0)
+
+
+class EngineOutcome(BaseModel):
+    """One engine's outcome of a draw and the links in contact once the hand had closed."""
+
+    model_config = _FINITE
+
+    outcome: Outcome
+    links: tuple[str, ...] = ()
+
+
+# What an outcome-only evaluation does not measure: present in a draw's result with their
+# empty values (μs 0, no signature), never a measurement.
+OUTCOME_ONLY_ABSENT: tuple[str, ...] = (
+    "mu_s", "effective_r", "effort_max_nm", "contacts_per_link", "grasp", "signature",
+    "mu_g", "mu_f", "mu_m", "robustness")
+
+
+class SampleRecord(BaseModel):
+    """A draw of a success probability, evaluated outcome only (workers/sim/samples.py): its
+    scales, and per engine its outcome and links in contact. The result's own outcome is the
+    first engine's held only where every engine held."""
+
+    model_config = _FINITE
+
+    scales: DrawScales = Field(default_factory=DrawScales)
+    engines: dict[str, EngineOutcome] = Field(min_length=1, max_length=4)
+    absent: tuple[str, ...] = Field(
+        default=OUTCOME_ONLY_ABSENT, description="result fields this evaluation left out")
+
+
 class PoseResult(BaseModel):
     model_config = ConfigDict(allow_inf_nan=False)
 
@@ -138,6 +178,8 @@ class PoseResult(BaseModel):
     error: str | None = Field(
         default=None, max_length=2000,
         description="outcome `error` only: the exception the evaluation of this pose raised")
+    sample: SampleRecord | None = Field(
+        default=None, description="a success probability's draw, evaluated outcome only")
 
 
 def nonfinite_fields(value: Any, path: str = "") -> list[str]:

@@ -26,6 +26,7 @@ from typing import Any, Literal
 
 import numpy as np
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.sim import EngineName
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Range = tuple[float, float]
@@ -69,9 +70,11 @@ class UncertaintyModel(BaseModel):
     mass_scale: Range = Field(default=(1.0, 1.0), description="object mass × uniform [lo, hi]")
     effort_scale: Range = Field(default=(1.0, 1.0),
                                 description="hand closing effort × uniform [lo, hi]")
-    engines: tuple[str, ...] = Field(
-        default=("pybullet",), min_length=1, max_length=4,
-        description="physics engines a draw may run in (the claim holds for these only)")
+    engines: tuple[EngineName, ...] | None = Field(
+        default=None, min_length=1, max_length=4,
+        description="physics engines each draw is simulated in: it succeeds only where it "
+        "holds with the grasp type in every one (the claim holds for these only); null: the "
+        "exploration's engine")
 
     @model_validator(mode="before")
     @classmethod
@@ -87,6 +90,16 @@ class UncertaintyModel(BaseModel):
         _check_range("friction_scale", self.friction_scale, 0.05, 2.0)
         _check_range("mass_scale", self.mass_scale, 0.1, 10.0)
         _check_range("effort_scale", self.effort_scale, 0.1, 2.0)
+        engines = self.engines or ()
+        if len(set(engines)) != len(engines):
+            raise ValueError(f"engines {engines} lists one twice")
+        scaled = any(r != (1.0, 1.0) for r in (self.friction_scale, self.mass_scale,
+                                               self.effort_scale))
+        if (scaled or len(engines) > 1) and not (self.position_mm or self.orientation_deg):
+            # A draw is stored under its start pose's key: with no pose error every draw
+            # would be the centre itself.
+            raise ValueError("scales or several engines need a pose error (position_mm or "
+                             "orientation_deg > 0): draws are told apart by their start poses")
         return self
 
     def values(self) -> dict[str, Any]:
@@ -105,6 +118,8 @@ class UncertaintyModel(BaseModel):
                                ("effort", self.effort_scale)):
             if (lo, hi) != (1.0, 1.0):
                 parts.append(f"{name} ×{lo:g}–{hi:g}")
+        if self.engines and self.engines != ("pybullet",):
+            parts.append("held in " + " and ".join(self.engines))
         return ", ".join(parts)
 
 

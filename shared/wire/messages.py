@@ -17,7 +17,7 @@ from graspscape.shared.specs.exploration import ConfigurationMatch
 from graspscape.shared.specs.gripper_archive import MAX_ARCHIVE_BYTES
 from graspscape.shared.specs.objects import ObjectSpec
 from graspscape.shared.specs.pose import Pose, tile_poses
-from graspscape.shared.specs.results import PoseResult
+from graspscape.shared.specs.results import DrawScales, PoseResult
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.shared.wire.keys import WORKER_ID_PATTERN
 from pydantic import BaseModel, ConfigDict, Field
@@ -94,6 +94,14 @@ class GripperRef(BaseModel):
     name: str | None = Field(default=None, max_length=1024)
     content_hash: ContentHash | None = None
     kind: Literal["toml", "urdf"] | None = None
+class TileSample(BaseModel):
+    """A tile of a success probability's draws: its poses are evaluated outcome only, in each
+    of `engines`, each under its scales (by pose key; a pose not listed: no scale)."""
+
+    model_config = ConfigDict(frozen=True, allow_inf_nan=False)
+
+    engines: list[EngineLabel] = Field(min_length=1, max_length=4)
+    scales: dict[str, DrawScales] = Field(default_factory=dict)
 
 
 class LeasedTile(BaseModel):
@@ -112,6 +120,8 @@ class LeasedTile(BaseModel):
     cells: list[tuple[float, float]]
     r_levels: list[float]
     attitudes: list[tuple[float, float, float]]
+    sample: TileSample | None = Field(
+        default=None, description="a tile of draws: evaluated outcome only (TileSample)")
 
     def poses(self) -> list[Pose]:
         return tile_poses(self.cells, self.r_levels, self.attitudes)

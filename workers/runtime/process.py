@@ -266,6 +266,10 @@ class WorkerProcess:
             if self.config.instant_pose_s:
                 self.stop.wait(self.config.instant_pose_s)
             return instant_result(pose)
+        if tile.sample is not None:  # a success probability's draw: outcome only
+            from graspscape.workers.sim.samples import tile_draw
+
+            return tile_draw(pose, tile, obj, self.cache_dir)
         from graspscape.workers.sim.evaluate import evaluate_pose
 
         gripper = self.grippers.gripper(tile.gripper_ref, tile.gripper)  # in memory by now

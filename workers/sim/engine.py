@@ -11,6 +11,7 @@ release and gravity, the μs probes' rollouts) lives in each engine's evaluator:
 from __future__ import annotations
 
 import importlib.util
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -54,6 +55,9 @@ class SceneLike(Protocol):
     def pair_friction(self, link: int) -> float: ...
     def place_hand(self, position: np.ndarray, rotation: np.ndarray) -> None: ...
     def penetrating(self, tolerance: float) -> bool: ...
+    # A P(success) draw's friction and mass scales, put back when the block ends (samples.py).
+    def scaled_object(self, friction: float, mass: float
+                      ) -> AbstractContextManager[None]: ...
 
 
 def available_engines() -> tuple[str, ...]:

@@ -105,6 +105,11 @@ class Evaluator:
         self.spread = gripper.spread_modes.get(self.settings.spread_mode, 0.0)
         self.pristine = save_state(cid)
 
+    @property
+    def run_settings(self) -> SimSettings:
+        """The settings the policy runs under (MuJoCo's scales its step counts)."""
+        return self.settings
+
     def close(self) -> None:
         if p.isConnected(self.client):
             p.disconnect(self.client)

@@ -4,6 +4,8 @@ Policies and the robustness tests drive it through these methods."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -129,3 +131,23 @@ class Scene:
         """Whether the hand interpenetrates the object deeper than `tolerance`."""
         points = get_closest_points(self.client, self.hand.body, self.object_body, 0.0)
         return any(pt.contact_distance < -tolerance for pt in points)
+
+    @contextmanager
+    def scaled_object(self, friction: float, mass: float) -> Iterator[None]:
+        """The object's friction coefficient and mass (its inertia with it) × these while
+        the block runs, put back after. pybullet multiplies two bodies' frictions, so the
+        hand-object pair's coefficient scales as the object's does."""
+        if friction == 1.0 and mass == 1.0:
+            yield
+            return
+        cid, body = self.client, self.object_body
+        dyn = get_dynamics_info(cid, body)
+        mu, m = float(dyn.lateral_friction), float(dyn.mass)
+        inertia = [float(x) for x in dyn.local_inertia_diagonal]
+        p.changeDynamics(body, -1, lateralFriction=mu * friction, mass=m * mass,
+                         localInertiaDiagonal=[x * mass for x in inertia], physicsClientId=cid)
+        try:
+            yield
+        finally:
+            p.changeDynamics(body, -1, lateralFriction=mu, mass=m,
+                             localInertiaDiagonal=inertia, physicsClientId=cid)

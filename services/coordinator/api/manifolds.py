@@ -123,6 +123,9 @@ class BestOut(BaseModel):
     uncertainty: dict[str, Any] = Field(
         default_factory=dict, description="the uncertainty model P(success) is stated under")
     level: float = Field(default=0.9, description="certified: lower bound ≥ this at 95 %")
+    engines: list[str] | None = Field(
+        default=None, description="the engines asked for: every pose's draws held with its "
+        "grasp type in each of them (null: not asked)")
     poses: list[BestPose]
 
 
@@ -217,6 +220,10 @@ def best(
         description="on a table: the best of the exploration of this one's group at resting "
         "pose `resting` (0: the most probable; GET /explorations/{id}/group lists them)",
     )] = None,
+    engines: Annotated[str | None, Query(
+        pattern=r"^(pybullet|mujoco)(,(pybullet|mujoco))?$",
+        description="comma-separated engines, e.g. pybullet,mujoco: only grasps whose draws "
+        "were simulated and held with their grasp type in each, ranked by P(success)")] = None,
 ) -> Any:
     if resting is not None:
         exploration_id = at_resting_pose(session, exploration_id, resting)
@@ -231,21 +238,24 @@ def best(
             raise InvalidInput("the cone axis must not be zero", loc=("query", "cone_x"))
     elif cone_half_angle_deg is not None:
         raise InvalidInput("cone_half_angle_deg needs cone_x, cone_y, cone_z", loc=("query",))
+    asked = tuple(sorted(set(engines.split(",")))) if engines else None
     # Every parameter is in the key (normalised as the computation reads them): the same
     # question at the same map version has the same answer (api/answers.py).
     key = (answers.version(session, exploration_id), "best", manifold, axis,
            cone_half_angle_deg, max_effort_nm, limit, ranking.Rank(rank).value,
-           pose_error_mm, pose_error_deg)
+           pose_error_mm, pose_error_deg, asked)
     return _json(answers.answer(key, lambda: _best_body(
         session, exploration_id, manifold=manifold, axis=axis,
         cone_half_angle_deg=cone_half_angle_deg, max_effort_nm=max_effort_nm, limit=limit,
-        rank=rank, pose_error_mm=pose_error_mm, pose_error_deg=pose_error_deg)))
+        rank=rank, pose_error_mm=pose_error_mm, pose_error_deg=pose_error_deg,
+        engines=asked)))
 
 
 def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
                axis: tuple[float, float, float] | None, cone_half_angle_deg: float | None,
                max_effort_nm: float | None, limit: int, rank: ranking.Rank,
-               pose_error_mm: float | None, pose_error_deg: float | None) -> bytes:
+               pose_error_mm: float | None, pose_error_deg: float | None,
+               engines: tuple[str, ...] | None = None) -> bytes:
     """/best's answer as JSON bytes: validated once here (BestOut), encoded as FastAPI encodes
     a response model, so the route returns it as it is, not validated and encoded again."""
     lattice = ranking.lattice_of_exploration(session, exploration_id)
@@ -257,6 +267,7 @@ def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
         cone_half_angle=math.radians(cone_half_angle_deg) if cone_half_angle_deg is not None
         else None,
         max_effort_nm=max_effort_nm, limit=limit, rank=rank, coarser=coarser,
+        engines=engines,
     )
     evidence = ranking.robust_evidence(session, exploration_id, rows, coarser=coarser,
                                        lattice=lattice)
@@ -282,14 +293,15 @@ def _best_body(session: Any, exploration_id: int, *, manifold: str | None,
     steps = 1 << coarser
     out = BestOut(
         exploration_id=exploration_id, manifold=manifold,
-        rank=(ranking.DEFAULT_RANK if rank == ranking.Rank.POINT else rank).value,
+        rank=(ranking.Rank.P_SUCCESS if engines else ranking.DEFAULT_RANK
+              if rank == ranking.Rank.POINT else rank).value,
         delta_steps=steps,
         delta_deg=math.degrees(lattice.dtheta(lattice.depth)) * steps,
         delta_mm=lattice.dr(lattice.depth) * 1000.0 * steps,
         error_within_delta=error_in_steps(lattice, pose_error_mm, pose_error_deg)
         <= steps + 1e-9,
         uncertainty=model.model_dump(mode="json"), level=level,
-        poses=poses,
+        engines=list(engines) if engines else None, poses=poses,
     )
     return encoded(out)
 

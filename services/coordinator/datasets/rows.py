@@ -105,15 +105,18 @@ def exploration_mesh(session: Session, exploration_id: int) -> Any | None:
 
 def pose_chunks(session: Session, exploration_id: int, mesh: Any | None,
                 chunk_rows: int | None = None) -> Iterator[Chunk]:
-    """Every stored pose, in pose-key order, `chunk_rows` (default CHUNK_ROWS) at a time. A
-    pose that formed no grasp needs `mesh` (a Conflict without it)."""
+    """Every stored pose but the draws, in pose-key order, `chunk_rows` (default CHUNK_ROWS)
+    at a time. A pose that formed no grasp needs `mesh` (a Conflict without it)."""
     from graspscape.services.coordinator.manifolds.p_success import estimates
 
     starts = StartPoses(mesh) if mesh is not None else None
     chances = estimates(session, exploration_id)
     columns = (PoseRow.pose_key, *_POSE, PoseRow.effective_r, PoseRow.outcome, PoseRow.viable,
                PoseRow.grasp, *(getattr(PoseRow, q) for q in QUALITIES))
-    query = (select(*columns).where(PoseRow.exploration_id == exploration_id)
+    # A draw of P(success) is evaluated outcome only (no grasp configuration, no μs): it is
+    # in its centre's p_success columns, not a grasp of the dataset.
+    query = (select(*columns).where(PoseRow.exploration_id == exploration_id,
+                                    PoseRow.sample.is_(None))
              .order_by(PoseRow.pose_key).execution_options(yield_per=chunk_rows or CHUNK_ROWS))
     for part in session.execute(query).partitions():
         yield _chunk(part, starts, chances)

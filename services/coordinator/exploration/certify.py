@@ -52,6 +52,7 @@ from graspscape.services.coordinator.manifolds.robust import (
 from graspscape.services.coordinator.manifolds.summary import robust_order
 from graspscape.shared.specs.exploration import CertificationSpec
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.results import DrawScales
 
 # The plan reason of a certification evaluation: "cert:<id of the centre's pose row>". The
 # reason column is what a plan row has room for (16 characters; ids below 10¹¹), and it ties
@@ -95,6 +96,7 @@ class Work:
     centre: Point
     label: int
     claim: bool = False  # a core claim's evaluation (`claims`), not a returned grasp's
+    scales: DrawScales | None = None  # a race's draw: its friction, mass and effort scales
 
 
 def robust_best(members: Iterable[Point], samples: Mapping[Point, StoredPose],

@@ -161,11 +161,14 @@ def certification_round(session: Session, exploration_id: int, spec: Exploration
         if key in seen or key in taken:
             continue
         seen.add(key)
+        drawn = w.point is None and not w.claim  # a draw of the uncertainty model
         out.append(Planned(
             w.pose, plan_level=lattice.depth if w.point is None else lattice.birth(w.point),
             tile_level=lattice.depth, round=round_,
             reason=certify.CLAIM_REASON if w.claim
-            else certify.reason_for(ids[samples[w.centre].key])))
+            else certify.reason_for(ids[samples[w.centre].key]),
+            draw_engines=spec.draw_engines() if drawn else None,
+            draw_scales=w.scales if drawn else None))
     return out
 
 
@@ -178,8 +181,10 @@ def _race(session: Session, exploration_id: int, spec: ExplorationSpec, computed
     def race(m: certify.Manifold) -> list[certify.Work]:
         cands = _candidates(session, exploration_id, spec, samples, m.members, scores,
                             lambda p: _radius(computed, p))
-        return [certify.Work(q, None, p, m.label)
-                for p, poses in racing.race_round(cands) for q in poses]
+        model = spec.uncertainty
+        return [certify.Work(q, None, p, m.label,
+                             scales=racing.scales_of(samples[p].key, model, i))
+                for p, drawn in racing.race_draws(cands) for i, q in drawn]
     return race
 
 
@@ -193,7 +198,7 @@ def _candidates(session: Session, exploration_id: int, spec: ExplorationSpec,
                                  racing.success.LOOKS[-1]) for p in points}
     stored = stored_by_key(session, exploration_id, [q.key() for s in seqs.values() for q in s])
     return racing.assess(points, samples, seqs.__getitem__, stored,
-                         level=spec.certification.level)
+                         level=spec.certification.level, engines=spec.draw_engines())
 
 
 def _labels_at(computed: ComputedMap) -> dict[Point, int]:
@@ -243,8 +248,6 @@ class CertifiedBest(BaseModel):
     model: str = Field(default="", description="the uncertainty model the numbers are under")
     certified: bool = Field(
         description="lower bound ≥ level at 95 % confidence under the stated model")
-    withheld: str | None = Field(
-        default=None, description="why no claim is made although the bound clears the level")
 
 
 def jitter_samples(session: Session, exploration_id: int, centres: Sequence[str]
@@ -331,9 +334,6 @@ def _best(lattice: Lattice, samples: Mapping[Point, StoredPose], p: Point,
     e = pick.estimate if pick is not None and pick.point == p else None
     model = spec.uncertainty
     clears = e is not None and e.certified
-    withheld = None
-    if clears and not racing.simulated(model):
-        withheld = "the model's friction, mass or effort scales are not simulated here"
     core = mrow.core_volume_cm3
     return CertifiedBest(
         label=(mrow.summary or {}).get("name", str(mrow.label)), volume_cm3=volume,
@@ -347,7 +347,7 @@ def _best(lattice: Lattice, samples: Mapping[Point, StoredPose], p: Point,
         p_success=None if e is None or not e.n else e.p,
         lower=None if e is None else e.lower, upper=None if e is None else e.upper,
         level=spec.certification.level, model=model.describe(),
-        certified=clears and withheld is None, withheld=withheld)
+        certified=clears)
 
 
 def format_best(b: CertifiedBest) -> str:
@@ -368,8 +368,6 @@ def format_best(b: CertifiedBest) -> str:
 def _claim(b: CertifiedBest) -> str:
     if b.certified:
         return f"certified: P ≥ {b.level:g} at 95 % under {b.model}"
-    if b.withheld:
-        return f"not certified ({b.withheld})"
     if b.upper is not None and b.upper < b.level:
         return f"not certified: P < {b.level:g} at 95 %"
     return f"not certified: undecided at P ≥ {b.level:g}"

@@ -8,6 +8,7 @@ batches both propose is evaluated once; only newly planned poses get tiles. Infe
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from datetime import datetime
 from typing import Any
 
@@ -24,7 +25,9 @@ from graspscape.services.coordinator.store.models import (
     PoseRow,
     TileRow,
 )
-from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.pose import Pose, tile_poses
+from graspscape.shared.specs.results import DrawScales
+from graspscape.shared.wire.messages import TileSample
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
@@ -57,11 +60,14 @@ def enqueue(session: Session, exploration_id: int, planned: Sequence[Planned], n
             target_poses: int) -> int:
     """Tiles for planned poses, per (round, tile level) after its last tile; the exploration
     runs again (it may have finished with its last tile). Returns the number of tiles."""
-    by_level: dict[tuple[int, int], list[Pose]] = {}
+    # Draws share tiles only with draws for the same engines (a tile of draws is evaluated
+    # outcome only, each pose under its own scales).
+    by_level: dict[tuple[int, int, tuple[str, ...]], list[Planned]] = {}
     for item in planned:
-        by_level.setdefault((item.round, item.tile_level), []).append(item.pose)
+        by_level.setdefault((item.round, item.tile_level, item.draw_engines or ()),
+                            []).append(item)
     added = 0
-    for (round_, level), poses in sorted(by_level.items()):
+    for (round_, level, engines), items in sorted(by_level.items()):
         last = session.scalar(
             select(func.max(TileRow.index)).where(
                 TileRow.exploration_id == exploration_id, TileRow.round == round_,
@@ -69,9 +75,18 @@ def enqueue(session: Session, exploration_id: int, planned: Sequence[Planned], n
             )
         )
         first = 0 if last is None else last + 1
+        grouped = group_tiles([item.pose for item in items], target_poses=target_poses,
+                              first_index=first)
+        if engines:
+            scales = {item.pose.key(): item.draw_scales for item in items
+                      if item.draw_scales is not None and item.draw_scales != DrawScales()}
+            grouped = [replace(t, sample=TileSample(engines=list(engines), scales={
+                k: scales[k] for k in (q.key() for q in tile_poses(t.cells, t.r_levels,
+                                                                    t.attitudes))
+                if k in scales})) for t in grouped]
         added += tiles.add_tiles(
             session, exploration_id=exploration_id, round=round_, level=level, now=now,
-            tiles=group_tiles(poses, target_poses=target_poses, first_index=first))
+            tiles=grouped)
     session.execute(
         update(ExplorationRow)
         .where(ExplorationRow.id == exploration_id)

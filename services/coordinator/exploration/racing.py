@@ -9,9 +9,9 @@ centre's grasp type (the digits in contact). Each round, the race (mapspace/succ
 LUCB over anytime-valid Clopper–Pearson bounds) names the candidates to sample, and each is
 planned up to its next look; the round after reads what was stored.
 
-The service's workers simulate a draw's start pose; a model's friction, mass and effort
-scales are not sent with a pose, so a claim is made only under a model without them
-(`simulated`); under one with them the bounds are reported and the claim withheld.
+A draw is evaluated outcome only (workers/sim/samples.py), at its start pose, under its
+friction, mass and effort scales, in each engine the model lists; it succeeds where it held
+with the centre's grasp type in every one of them (mapspace/draws.success_of).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from graspscape.services.coordinator.mapspace import success
 from graspscape.services.coordinator.mapspace.draws import (  # noqa: F401  (the race's vocabulary)
     draw_poses,
     outcomes,
-    simulated,
+    scales_of,
     success_of,
 )
 from graspscape.shared.specs.pose import Pose
@@ -49,12 +49,12 @@ class Candidate:
 
 def assess(points: Sequence[Point], samples: Mapping[Point, StoredPose],
            sequence: Callable[[Point], Sequence[Pose]], stored: Mapping[str, StoredPose],
-           *, level: float) -> list[Candidate]:
-    """Each candidate's estimate from its stored draws."""
+           *, level: float, engines: Sequence[str] | None = None) -> list[Candidate]:
+    """Each candidate's estimate from its stored draws (successes in each of `engines`)."""
     out = []
     for p in points:
         seq = tuple(sequence(p))
-        done = outcomes(samples[p], seq, stored)
+        done = outcomes(samples[p], seq, stored, engines)
         out.append(Candidate(p, seq, success.estimate(done, level=level)))
     return out
 
@@ -62,12 +62,17 @@ def assess(points: Sequence[Point], samples: Mapping[Point, StoredPose],
 def race_round(cands: Sequence[Candidate]) -> list[tuple[Point, list[Pose]]]:
     """The draws one round plans for a manifold: the race's chosen candidates, each up to its
     next look (the draws not stored yet)."""
+    return [(p, [q for _, q in drawn]) for p, drawn in race_draws(cands)]
+
+
+def race_draws(cands: Sequence[Candidate]) -> list[tuple[Point, list[tuple[int, Pose]]]]:
+    """`race_round` with each draw's index in its centre's sequence (its scales' seed)."""
     out = []
     for i in success.race([c.estimate for c in cands]):
         c = cands[i]
         target = success.next_look(c.estimate.n)
         if target is not None:
-            out.append((c.point, list(c.sequence[c.estimate.n:target])))
+            out.append((c.point, list(enumerate(c.sequence))[c.estimate.n:target]))
     return out
 
 

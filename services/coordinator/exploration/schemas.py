@@ -153,6 +153,10 @@ class PoseOut(PoseValues):
                                      "uncertain")
     certifies: str | None = Field(default=None, description="the key of the pose whose "
                                   "certification this evaluation serves")
+    sample: dict[str, Any] | None = Field(
+        default=None, description="a draw of a success probability, evaluated outcome only: "
+        "its friction, mass and effort scales, its outcome and links in contact per engine, "
+        "and the fields it leaves out (`absent`: μs is 0 there, not measured)")
 
 
 class PoseFilter(BaseModel):

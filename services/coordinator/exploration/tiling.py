@@ -17,6 +17,7 @@ from itertools import pairwise
 from graspscape.services.coordinator.exploration.lattice import Lattice, Point
 from graspscape.shared.specs.exploration import PoseGridSpec
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.wire.messages import TileSample
 
 Cell = tuple[float, float]  # (θ, φ)
 Attitude = tuple[float, float, float]  # (roll, pitch, yaw)
@@ -28,6 +29,7 @@ class TilePlan:
     cells: list[Cell]
     r_levels: list[float]
     attitudes: list[Attitude]
+    sample: TileSample | None = None  # a tile of draws: evaluated outcome only
 
     @property
     def n_poses(self) -> int:

@@ -16,7 +16,11 @@ from enum import StrEnum
 
 from graspscape.services.coordinator.errors import NotFound
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
-from graspscape.services.coordinator.manifolds.p_success import SuccessOut, estimates
+from graspscape.services.coordinator.manifolds.p_success import (
+    SuccessOut,
+    confirmed,
+    estimates,
+)
 from graspscape.services.coordinator.manifolds.robust import (
     Neighbourhoods,
     RobustLabel,
@@ -110,6 +114,7 @@ def best_poses(
     rank: Rank | str = DEFAULT_RANK,
     coarser: int = 0,
     pose_keys: Collection[str] | None = None,
+    engines: Collection[str] | None = None,
 ) -> list[PoseRow]:
     """Viable poses, best first by `rank` (then μs desc, then key), optionally inside one
     manifold, an approach cone, below a joint effort, and among `pose_keys`.
@@ -118,14 +123,18 @@ def best_poses(
     (NULL: the test was not run) come after every pose that has it. `Rank.ROBUST` ranks by the
     robust map at δ = `coarser` steps: at the finest step by the stored scores (label, then
     robust_q; poses the map has not scored yet last), at a coarser one by scores computed
-    here over the stored samples (`robust_scores`)."""
+    here over the stored samples (`robust_scores`). With `engines`, only the poses whose
+    draws were simulated and counted in each of them, by P(success)."""
     rank = Rank(rank)
     if rank == Rank.POINT:
         rank = DEFAULT_RANK
+    if engines:
+        rank = Rank.P_SUCCESS
     if rank == Rank.P_SUCCESS:
+        est = None if not engines else confirmed(estimates(session, exploration_id), engines)
         return _best_p_success(session, exploration_id, label=label, cone_axis=cone_axis,
                                cone_half_angle=cone_half_angle, max_effort_nm=max_effort_nm,
-                               limit=limit, coarser=coarser)
+                               limit=limit, coarser=coarser, est=est, drawn_only=bool(engines))
     if rank == Rank.ROBUST and coarser > 0:
         return _best_robust_coarser(session, exploration_id, label=label, cone_axis=cone_axis,
                                     cone_half_angle=cone_half_angle,
@@ -169,9 +178,10 @@ def best_by_p_success(session: Session, exploration_id: int, est: Mapping[str, S
 def _best_p_success(session: Session, exploration_id: int, *, label: int | None,
                     cone_axis: tuple[float, float, float] | None, cone_half_angle: float | None,
                     max_effort_nm: float | None, limit: int, coarser: int,
-                    est: Mapping[str, SuccessOut] | None = None) -> list[PoseRow]:
-    """Poses with draws by the lower bound of P(success) (then k/n, μs, key), then the rest
-    by the robust order, each passing the filters."""
+                    est: Mapping[str, SuccessOut] | None = None,
+                    drawn_only: bool = False) -> list[PoseRow]:
+    """Poses with draws by the lower bound of P(success) (then k/n, μs, key), then (unless
+    `drawn_only`) the rest by the robust order, each passing the filters."""
     if est is None:
         est = estimates(session, exploration_id)
     filters = dict(label=label, cone_axis=cone_axis, cone_half_angle=cone_half_angle,
@@ -180,6 +190,8 @@ def _best_p_success(session: Session, exploration_id: int, *, label: int | None,
     drawn = best_poses(session, exploration_id, limit=len(est), rank=Rank.MU_S,
                        pose_keys=est.keys(), **filters) if est else []
     drawn.sort(key=lambda r: (-est[r.pose_key].lower, -est[r.pose_key].p, -r.mu_s, r.pose_key))
+    if drawn_only:
+        return drawn[:limit]
     rest = best_poses(session, exploration_id, limit=limit + len(drawn), rank=Rank.ROBUST,
                       coarser=coarser, **filters)
     keys = {r.pose_key for r in drawn}

@@ -66,6 +66,8 @@ def _cells(labels: dict[int, str], dialect: str, *, for_csv: bool) -> tuple[Any,
     manifold = (case(labels, value=PoseRow.manifold_id, else_=literal(""))
                 if labels else literal(""))
     source = case(
+        # a P(success) draw, evaluated outcome only: its μs of 0 is not a measurement
+        (PoseRow.sample.is_not(None), literal("draw")),
         (PoseRow.worker_id.like("shortcut:%"), PoseRow.worker_id),
         (func.coalesce(PoseRow.inferred_from, "") != "", literal("shortcut:configuration")),
         else_=literal("evaluated"),

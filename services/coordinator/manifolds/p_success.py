@@ -39,6 +39,9 @@ class SuccessOut(BaseModel):
     upper: float = Field(description="anytime-valid 95 % upper bound")
     certified: bool = Field(description="lower ≥ the certification level at 95 % under the "
                             "stated model")
+    engines: list[str] = Field(
+        default_factory=list, description="the physics engines every draw was simulated in "
+        "and held in with the pose's grasp type to count as a success")
 
 
 def model_of(session: Session, exploration_id: int) -> tuple[UncertaintyModel, float]:
@@ -69,11 +72,19 @@ def estimates(session: Session, exploration_id: int,
         seqs[s.key] = (s, draws.draw_poses(s, spec.uncertainty, radius, success.LOOKS[-1]))
     keys_drawn = [q.key() for _, seq in seqs.values() for q in seq]
     stored = stored_by_key(session, exploration_id, keys_drawn)
-    level = spec.certification.level
+    level, engines = spec.certification.level, spec.draw_engines()
     out = {}
     for key, (centre, seq) in seqs.items():
-        e = success.estimate(draws.outcomes(centre, seq, stored), level=level)
+        e = success.estimate(draws.outcomes(centre, seq, stored, engines), level=level)
         if e.n:
+            ran = draws.engines_of(seq, stored, spec.settings.engine)
             out[key] = SuccessOut(k=e.k, n=e.n, p=e.p, lower=e.lower, upper=e.upper,
-                                  certified=e.certified and draws.simulated(spec.uncertainty))
+                                  certified=e.certified,
+                                  engines=[x for x in engines if x in ran])
     return out
+
+
+def confirmed(est: dict[str, SuccessOut], engines: Iterable[str]) -> dict[str, SuccessOut]:
+    """The estimates whose draws were all simulated, and counted, in each of `engines`."""
+    wanted = set(engines)
+    return {k: e for k, e in est.items() if wanted <= set(e.engines)}

@@ -43,6 +43,9 @@ class StoredPose:
     joints: dict[str, float] = field(default_factory=dict)
     grasp: dict[str, Any] | None = None
     source: str = "evaluated"  # or "shortcut:normal", "shortcut:configuration", "shortcut:symmetry"
+    # A draw's outcome and digits in contact per engine (its stored `sample` record, an
+    # outcome-only evaluation); empty for every other pose.
+    engines: dict[str, tuple[bool, frozenset[str]]] = field(default_factory=dict)
 
     @staticmethod
     def from_row(row: Any) -> StoredPose:
@@ -83,11 +86,20 @@ class StoredPose:
             joints={k: float(v) for k, v in (sig.get("joint_angles") or {}).items()},
             grasp=get("grasp"),
             source=source_of(get("worker_id"), get("inferred_from")),
+            engines=engine_outcomes(get("sample")),
         )
 
     def direction(self) -> tuple[float, float, float]:
         st = math.sin(self.theta)
         return (st * math.cos(self.phi), st * math.sin(self.phi), math.cos(self.theta))
+
+
+def engine_outcomes(record: Mapping[str, Any] | None) -> dict[str, tuple[bool, frozenset[str]]]:
+    """A stored draw record's (PoseResult.sample) held flag and digits in contact by engine."""
+    if not record:
+        return {}
+    return {name: (e.get("outcome") == "held", frozenset(digit(x) for x in e.get("links", ())))
+            for name, e in (record.get("engines") or {}).items()}
 
 
 def source_of(worker_id: str | None, inferred_from: str | None) -> str:

@@ -159,6 +159,12 @@ class TileRow(Base):
     # The worker the lease of `lease_epoch` went to, kept after the lease ends (lease_owner
     # is cleared): a late batch under that epoch is taken only from it (migration 0016).
     lease_holder: Mapped[str | None] = mapped_column(String(128))
+    # A tile of a success probability's draws (migration 0017): the engines each draw runs in
+    # and each pose's friction, mass and effort scales (wire TileSample); its poses are
+    # evaluated outcome only. `needs_engines`: those engines sorted and comma-joined, which a
+    # lease compares with the sets of engines the asking worker runs. NULL for other tiles.
+    sample: Mapped[dict[str, Any] | None] = mapped_column(JSON(none_as_null=True), nullable=True)
+    needs_engines: Mapped[str | None] = mapped_column(String(64), nullable=True)
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     last_error: Mapped[str | None] = mapped_column(Text)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow)
@@ -296,6 +302,10 @@ class PoseRow(Base):
     # The key of the pose whose certification this evaluation serves (a jittered or extra
     # evaluation of its neighbourhood); NULL for every other pose.
     certifies: Mapped[str | None] = mapped_column(String(128))
+    # A draw's record (PoseResult.sample, migration 0017): its scales, outcome and links in
+    # contact per engine, and the fields an outcome-only evaluation leaves out (μs stored as 0
+    # there is no μs). NULL for every evaluation that is not a draw.
+    sample: Mapped[dict[str, Any] | None] = mapped_column(JSON(none_as_null=True), nullable=True)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

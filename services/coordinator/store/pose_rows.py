@@ -62,6 +62,7 @@ def _values(result: PoseResult, robustness: bool = True) -> tuple[Any, ...]:
         result.eval_time_s,
         result.inferred_from,
         result.error,
+        _json_text(result.sample),
         result.mu_g,
         result.mu_f,
         result.mu_m,
@@ -102,6 +103,7 @@ _PER_POSE = (
     ("eval_time_s", "float8"),
     ("inferred_from", "varchar"),
     ("error", "varchar"),
+    ("sample", "text"),
     *((name, "float8") for name in POSE_METRIC_COLUMNS),
 )
 # The robustness tests are chosen per exploration and off by default: a batch without any
@@ -111,7 +113,7 @@ _WITHOUT_ROBUSTNESS = _PER_POSE[: len(_PER_POSE) - len(ROBUSTNESS_COLUMNS)]
 assert tuple(name for name, _ in _PER_POSE[len(_WITHOUT_ROBUSTNESS):]) == ROBUSTNESS_COLUMNS
 _PER_BATCH = ("exploration_id", "tile_id", "worker_id", "created_at")
 _CONFLICT = "ON CONFLICT (exploration_id, pose_key) DO NOTHING RETURNING viable"
-_JSON_COLUMNS = ("contacts_per_link", "signature", "grasp")
+_JSON_COLUMNS = ("contacts_per_link", "signature", "grasp", "sample")
 
 
 def _pg_insert(per_pose: tuple[tuple[str, str], ...]) -> str:

@@ -86,8 +86,10 @@ def best_pose_ids(
     """Ids of the best viable poses, best first (see the module docstring for the order);
     only those among `pose_keys` where given."""
     # `viable = true`, not a bare `viable`: SQLite uses an index column only in a comparison.
+    # A draw of a success probability is evidence about its centre, evaluated outcome only
+    # (no μs, effort or margins): never a grasp to return.
     where: list[ColumnElement[bool]] = [PoseRow.exploration_id == exploration_id,
-                                        PoseRow.viable == true()]
+                                        PoseRow.viable == true(), PoseRow.sample.is_(None)]
     if manifold_id is not None:
         where.append(PoseRow.manifold_id == manifold_id)
     if max_effort_nm is not None:

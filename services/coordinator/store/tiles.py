@@ -37,21 +37,42 @@ class TileShape(Protocol):
     def n_poses(self) -> int: ...
 
 
+def engine_set(engines: Collection[str]) -> str:
+    """A set of engines as `tiles.needs_engines` stores it: sorted, comma-joined."""
+    return ",".join(sorted(set(engines)))
+
+
+def engine_sets(engines: Collection[str]) -> list[str]:
+    """Every non-empty subset of a worker's engines as `engine_set` writes it: the tiles of
+    draws it can run are those whose `needs_engines` is one of these."""
+    names = sorted(set(engines))
+    return [engine_set(n for i, n in enumerate(names) if mask >> i & 1)
+            for mask in range(1, 1 << len(names))]
+
+
 def add_tiles(session: Session, *, exploration_id: int, level: int, tiles: Sequence[TileShape],
               now: datetime, round: int = 0) -> int:
     """Queue new tiles of one exploration in one round at one level; returns how many."""
-    values = [
-        {
+    values = []
+    for t in tiles:
+        sample = _sample_of(t)
+        values.append({
             "exploration_id": exploration_id, "round": round, "level": level, "index": t.index,
             "cells": [list(c) for c in t.cells], "r_levels": t.r_levels,
             "attitudes": [list(a) for a in t.attitudes], "n_poses": t.n_poses,
             "state": TileState.QUEUED, "lease_epoch": 0, "attempts": 0, "updated_at": now,
-        }
-        for t in tiles
-    ]
+            "sample": sample,
+            "needs_engines": None if sample is None else engine_set(sample["engines"]),
+        })
     for start in range(0, len(values), _INSERT_CHUNK):
         session.execute(insert(TileRow), values[start : start + _INSERT_CHUNK])
     return len(values)
+
+
+def _sample_of(tile: TileShape) -> dict[str, Any] | None:
+    """A tile of draws' wire TileSample as JSON (exploration/tiling.TilePlan.sample)."""
+    sample = getattr(tile, "sample", None)
+    return None if sample is None else sample.model_dump(mode="json")
 
 
 # --- leasing ---------------------------------------------------------------------------------
@@ -67,7 +88,10 @@ def _lease_statement(*, skip_locked: bool) -> Any:
     candidates = (
         select(TileRow.id)
         .where(TileRow.state == TileState.QUEUED,
-               TileRow.exploration_id.in_(runnable.scalar_subquery()))
+               TileRow.exploration_id.in_(runnable.scalar_subquery()),
+               # a tile of draws runs in each of its engines: the worker must run them all
+               TileRow.needs_engines.is_(None)
+               | TileRow.needs_engines.in_(bindparam("engine_sets", expanding=True)))
         .order_by(TileRow.exploration_id, TileRow.round, TileRow.level, TileRow.id)
         .limit(bindparam("n"))
     )
@@ -95,6 +119,7 @@ def _lease_statement(*, skip_locked: bool) -> Any:
             TileRow.cells,
             TileRow.r_levels,
             TileRow.attitudes,
+            TileRow.sample,
         )
     )
 
@@ -111,7 +136,7 @@ def lease(session: Session, *, worker_id: str, n: int, expires: datetime, now: d
     an older one."""
     rows = session.connection().execute(
         _LEASE[skip_locked], {"n": n, "owner": worker_id, "expires": expires, "now": now,
-                              "engines": list(engines)}
+                              "engines": list(engines), "engine_sets": engine_sets(engines)}
     ).all()
     return sorted((LeasedTile.model_validate(row._mapping) for row in rows),
                   key=lambda t: t.tile_id)

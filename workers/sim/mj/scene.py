@@ -12,6 +12,8 @@ The hand's own weight is compensated (`gravcomp`), as a stiff pybullet drive car
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import mujoco
@@ -36,6 +38,12 @@ class MjContact(NamedTuple):
 
 
 class MjScene:
+    # No support table in MuJoCo (a plane is refused when the evaluator is made): the table's
+    # hooks (table.start_outcome, closing_outcome, the weight as a force) find none.
+    table_body: int | None = None
+    watch = None
+    object_weight_n: float = 0.0
+
     def __init__(self, world: World, data: mujoco.MjData, hand: MjHand, offset: np.ndarray,
                  dt: float) -> None:
         self.world, self.data, self.hand = world, data, hand
@@ -157,3 +165,23 @@ class MjScene:
             return False
         hand = self._link[d.contact.geom] != -2
         return bool(np.any((d.contact.dist < -tolerance) & (hand[:, 0] != hand[:, 1])))
+
+    @contextmanager
+    def scaled_object(self, friction: float, mass: float) -> Iterator[None]:
+        """The hand-object pairs' friction coefficient and the object's mass (its inertia with
+        it) × these while the block runs, put back after. MuJoCo combines two geoms'
+        frictions by their maximum, so every geom's is scaled (world.py: only hand-object
+        pairs collide, each with the product pybullet uses)."""
+        if friction == 1.0 and mass == 1.0:
+            yield
+            return
+        model, b = self.model, self.object_body
+        mu = model.geom_friction[:, 0].copy()
+        m, inertia = float(model.body_mass[b]), model.body_inertia[b].copy()
+        model.geom_friction[:, 0] = mu * friction
+        model.body_mass[b], model.body_inertia[b] = m * mass, inertia * mass
+        try:
+            yield
+        finally:
+            model.geom_friction[:, 0] = mu
+            model.body_mass[b], model.body_inertia[b] = m, inertia

@@ -34,7 +34,7 @@ from typing import Protocol
 from graspscape.services.coordinator.exploration.tiling import TilePlan
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
-from graspscape.shared.specs.results import PoseResult
+from graspscape.shared.specs.results import DrawScales, PoseResult
 from sqlalchemy.orm import Session
 
 
@@ -44,7 +44,9 @@ class Planned:
     its tile goes to `round` and `tile_level`, which order the queue (tiles are leased by
     round, then level, then id); `reason` is stored with the plan ("refine", "search", …);
     `counted`: whether it adds to the exploration's poses_total (False where
-    `planned_poses` counted it already)."""
+    `planned_poses` counted it already); `draw_engines`: a success probability's draw,
+    evaluated outcome only in each of these engines under `draw_scales` (None: a full
+    evaluation)."""
 
     pose: Pose
     plan_level: int
@@ -52,6 +54,8 @@ class Planned:
     reason: str
     round: int = 0
     counted: bool = True
+    draw_engines: tuple[str, ...] | None = None
+    draw_scales: DrawScales | None = None
 
 
 @dataclass(frozen=True)

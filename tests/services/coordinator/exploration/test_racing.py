@@ -41,4 +41,39 @@ def test_race_round_plans_each_chosen_candidate_to_its_next_look() -> None:
     # the leader to 24 draws; the refuted one gets nothing
     assert planned == [((0,), list(seqs[(0,)][12:24]))]
     assert racing.best(cands).point == (0,)
-    assert racing.simulated(model) and not racing.simulated(UncertaintyModel(preset="field"))
+    drawn = racing.race_draws(cands)
+    assert [i for i, _ in drawn[0][1]] == list(range(12, 24))
+
+
+def test_a_draw_succeeds_only_where_each_listed_engine_held_the_grasp_type() -> None:
+    centre = _pose("c", 1.0, True, ("A", "B"))
+
+    def drawn(**engines: tuple[bool, tuple[str, ...]]) -> StoredPose:
+        return StoredPose(key="d", theta=1.0, phi=0.5, r=0.01, roll=0.0, pitch=0.0, yaw=0.0,
+                          viable=all(h for h, _ in engines.values()), outcome="held",
+                          mu_s=0.0, engines={k: (h, frozenset(d)) for k, (h, d) in
+                                             engines.items()})
+
+    both = drawn(pybullet=(True, ("A", "B")), mujoco=(True, ("A", "B")))
+    assert racing.success_of(centre, both, ("pybullet", "mujoco"))
+    other_type = drawn(pybullet=(True, ("A", "B")), mujoco=(True, ("A",)))
+    assert not racing.success_of(centre, other_type, ("pybullet", "mujoco"))
+    assert racing.success_of(centre, other_type, ("pybullet",))
+    # An engine the draw never ran in is no success: a claim names only engines simulated.
+    assert not racing.success_of(centre, drawn(pybullet=(True, ("A", "B"))),
+                                 ("pybullet", "mujoco"))
+
+
+def test_the_model_tells_its_draws_apart_and_lists_each_engine_once() -> None:
+    import pytest
+    from pydantic import ValidationError
+
+    assert UncertaintyModel(preset="field").friction_scale == (0.5, 1.0)
+    with pytest.raises(ValidationError, match="pose error"):
+        UncertaintyModel(preset="none", friction_scale=(0.5, 1.0))
+    with pytest.raises(ValidationError, match="twice"):
+        UncertaintyModel(engines=("pybullet", "pybullet"))
+    with pytest.raises(ValidationError):
+        UncertaintyModel(engines=("bullet3",))
+    both = UncertaintyModel(preset="lab", engines=("pybullet", "mujoco"))
+    assert "held in pybullet and mujoco" in both.describe()

@@ -1,14 +1,16 @@
-"""Tiles go only to workers that run their exploration's physics engine (both databases)."""
+"""Tiles go only to workers that run their exploration's physics engine, and a tile of
+P(success) draws only to one that runs each of its engines (both databases)."""
 
 from __future__ import annotations
 
 from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.exploration.tiling import TilePlan
 from graspscape.services.coordinator.store.models import ObjectRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.shared.wire.codec import decode, encode
-from graspscape.shared.wire.messages import LeaseRequest
+from graspscape.shared.wire.messages import LeaseRequest, ObjectRef
 from sqlalchemy.orm import Session
 
 
@@ -43,3 +45,36 @@ def test_a_lease_request_without_engines_means_pybullet() -> None:
     assert b"engines" not in raw
     request = decode(raw)
     assert isinstance(request, LeaseRequest) and request.engines == ["pybullet"]
+
+
+def test_a_tile_of_draws_goes_only_to_a_worker_running_each_of_its_engines(
+        session: Session) -> None:
+    from datetime import UTC, datetime
+
+    from graspscape.services.coordinator.store import tiles
+    from graspscape.services.coordinator.store.models import TileRow
+    from graspscape.shared.specs.results import DrawScales
+    from graspscape.shared.wire.messages import TileLease, TileSample
+    from sqlalchemy import update
+
+    eid = _exploration(session, "pybullet")
+    session.execute(update(TileRow).values(state="done"))  # only the draws are left
+    sample = TileSample(engines=["pybullet", "mujoco"],
+                        scales={"k": DrawScales(friction=0.5, mass=1.1)})
+    tile = TilePlan(0, [(1.0, 0.5)], [0.01], [(0.0, 0.0, 0.0)], sample=sample)
+    tiles.add_tiles(session, exploration_id=eid, level=1, round=5, tiles=[tile],
+                    now=datetime.now(UTC))
+    session.commit()
+    assert tiles.engine_sets(("pybullet", "mujoco")) == ["mujoco", "pybullet",
+                                                        "mujoco,pybullet"]
+    assert not lease_tiles(session, worker_id="old", n=5, lease_seconds=60,
+                           engines=("pybullet",))
+    assert not lease_tiles(session, worker_id="mj", n=5, lease_seconds=60,
+                           engines=("mujoco",))
+    (leased,) = lease_tiles(session, worker_id="both", n=5, lease_seconds=60,
+                            engines=("mujoco", "pybullet"))
+    assert leased.sample == sample
+    # ... and the lease message carries it to the worker as it was planned.
+    message = TileLease.of(leased, object=ObjectRef(object_id=1, name="sphere"),
+                           gripper="robotiq_3f", settings=SimSettings())
+    assert decode(encode(message)).sample == sample

@@ -86,10 +86,10 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
                     ("explorations", "id, object_id, spec, status, tiles_total, poses_total, "
                                      "poses_done, viable_count, created_at, updated_at, "
                                      "started_at, finished_at"),
-                    # the columns of 0005 (0009 adds `error`, 0010 the robust map's)
+                    # the columns of 0005 (0009 adds `error`, 0010 the robust map's, 0017 …)
                     ("poses", ", ".join(c.name for c in PoseRow.__table__.columns
                                         if c.name not in {"error", "robust_s", "robust_q",
-                                                          "robust_label", "certifies"})),
+                                                          "robust_label", "certifies", "sample"})),
                     ("objects", "*"),
                     # the columns of 0005 (0007 adds `round`)
                     ("tiles", 'id, exploration_id, level, "index", cells, r_levels, attitudes, '
