@@ -24,13 +24,12 @@ from graspscape.shared.specs.results import Outcome, PhaseTimes, PoseResult
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.evaluate import slip_check
 from graspscape.workers.sim.grasp_record import grasp_fields
-from graspscape.workers.sim.gripper.model import hand_model
 from graspscape.workers.sim.metric import mu_s
 from graspscape.workers.sim.mj.hand import MjHand
+from graspscape.workers.sim.mj.mjcf import load_world
 from graspscape.workers.sim.mj.probes import probe_state
 from graspscape.workers.sim.mj.robustness import capture, run_tests
 from graspscape.workers.sim.mj.scene import MjScene
-from graspscape.workers.sim.mj.world import build_world
 from graspscape.workers.sim.objects import PreparedObject
 from graspscape.workers.sim.policies import get_policy
 from graspscape.workers.sim.start_pose import StartPose, start_pose
@@ -59,8 +58,7 @@ class MjEvaluator:
             update={"check_every_steps": settings.policy.check_every_steps * k})})
         dt = settings.physics.dt / k
         offset = np.array(world_offset, dtype=float)
-        model = hand_model(gripper, work_dir / "urdf")
-        self.world = build_world(prepared, model, dt, offset)
+        self.world, model = load_world(prepared, gripper, dt, offset, work_dir)
         self.data = mujoco.MjData(self.world.model)
         hand = MjHand(self.world, self.data, gripper, model)
         self.scene = MjScene(self.world, self.data, hand, offset, dt)

@@ -45,6 +45,7 @@ class MjScene:
         self._target_pos, self._target_quat = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
         self._cap = DRIVE_MAX_FORCE_N
         self._gains = np.eye(6)
+        self._coupling = np.zeros((3, 3))
         self._err = np.zeros(6)
         self._w2, self._2w = DRIVE_BANDWIDTH_RAD_S**2, 2.0 * DRIVE_BANDWIDTH_RAD_S
         self._link = world.geom_link
@@ -57,6 +58,12 @@ class MjScene:
         mujoco.mj_fullM(m, d, full)
         s = self.world.palm_dofs
         self._gains = full[s, s].copy()
+        # The free joint's linear coordinates are in the world's axes, its angular ones in the
+        # palm's: the block coupling them turns with the palm (−m·R·[c]×, c the centre of mass
+        # in the palm's frame). Kept here unturned, turned by the palm's rotation each step;
+        # left fixed, it pushed a hand whose centre of mass lies 5 cm behind the palm (the
+        # 2F-85) into a growing spin once it was turned 90° from where this ran.
+        self._coupling = d.xmat[self.world.palm_body].reshape(3, 3).T @ self._gains[:3, 3:]
 
     # --- the drive ---------------------------------------------------------------------
     def drive_to(self, position: np.ndarray, rotation: np.ndarray,
@@ -81,7 +88,11 @@ class MjScene:
         # The turn from the palm's orientation to the target's, in the palm's axes (the free
         # joint's angular dofs are in the body's axes).
         mujoco.mju_subQuat(err[3:], self._target_quat, d.xquat[b])
-        force = self._gains @ (self._w2 * err - self._2w * d.qvel[self.world.palm_dofs])
+        accel = self._w2 * err - self._2w * d.qvel[self.world.palm_dofs]
+        turned = d.xmat[b].reshape(3, 3) @ self._coupling  # this step's −m·R·[c]×
+        gains = self._gains
+        force = np.concatenate([gains[:3, :3] @ accel[:3] + turned @ accel[3:],
+                                turned.T @ accel[:3] + gains[3:, 3:] @ accel[3:]])
         lin, ang = float(np.dot(force[:3], force[:3])), float(np.dot(force[3:], force[3:]))
         cap2 = self._cap * self._cap
         if lin > cap2:
