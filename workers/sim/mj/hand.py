@@ -141,9 +141,10 @@ class MjHand(Hand):
         return [float(self.data.qpos[self._qpos[j]]) for j in finger.joints]
 
     def joint_angles(self) -> dict[str, float]:
-        names = sorted(self.joint_by_name.items(), key=lambda kv: kv[1])
-        return {name.removesuffix("_joint"): float(self.data.qpos[self._qpos[j]])
-                for name, j in names}
+        """By the Graspscape link name each joint moves (a URDF's joint name less `_joint`;
+        an MJCF's `<finger>_<k>`, mj/mjcf.py)."""
+        return {self.link_names[j]: float(self.data.qpos[self._qpos[j]])
+                for j in sorted(self.joint_by_name.values())}
 
     def max_finger_torque(self) -> float:
         forces = [abs(self.data.actuator_force[self._act[j]]) * self._trn.get(j, (1.0, 1.0))[1]
