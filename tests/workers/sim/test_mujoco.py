@@ -102,7 +102,7 @@ def test_mujoco_measures_the_torque_and_friction_margins(sim_cache, object_cache
     assert tau is not None and 0.0 < tau < effort
     mu = first.robustness.friction_margin
     assert mu is not None and 0.0 < mu < prepared.friction
-    assert first.robustness.gravity_test_share is None  # not built for MuJoCo
+    assert first.robustness.gravity_test_share is None  # not chosen
     # The trials leave nothing behind: the next evaluation is the same.
     again = evaluator.evaluate(FROM_SIDE)
     assert again.robustness == first.robustness and again.mu_s == first.mu_s
