@@ -71,13 +71,6 @@ def test_the_same_pose_gives_the_same_result_twice_in_mujoco(mj_sphere) -> None:
     assert mj_sphere.evaluate(FROM_SIDE).model_dump(exclude=skip) == first
 
 
-def test_mujoco_runs_the_baseline_policy_only(sim_cache, object_cache) -> None:
-    prepared = prepare_object(ObjectSpec(name="sphere"), object_cache)
-    with pytest.raises(ValueError, match="baseline"):
-        make_evaluator(prepared, load_gripper("robotiq_3f"),
-                       SimSettings(engine="mujoco", policy_name="haptic"), work_dir=sim_cache)
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("gripper", ["robotiq_3f_urdf", "franka_hand"])
 def test_urdf_grippers_grasp_the_sphere_in_mujoco(gripper, sim_cache, object_cache) -> None:

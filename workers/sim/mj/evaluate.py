@@ -5,7 +5,8 @@ loading, saved states (copies of mjData), release (the fixture weld switched off
 the probes' rollouts (mj/probes.py).
 
 MuJoCo steps `physics.mujoco_substeps` times per pybullet step: the step counts a policy or a
-probe window is given (check_every_steps, window_steps) are scaled by it, so each lasts as
+probe window is given (check_every_steps, the haptic policy's steps_per_iteration,
+window_steps) are scaled by it, so each lasts as
 long as in pybullet. The robustness margins and grasp tests run as pybullet's do, through
 mj/robustness.py's trials; rendering through MuJoCo is not built: a picture is drawn by pybullet's
 renderer from the MuJoCo grasp's poses (mj/picture.py).
@@ -48,17 +49,17 @@ class MjEvaluator:
                  settings: SimSettings | None = None, *, work_dir: Path,
                  world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         self.settings = settings = settings or SimSettings()
-        if settings.policy_name != "baseline":
-            raise ValueError("the MuJoCo engine runs the baseline policy only "
-                             f"(asked for {settings.policy_name!r})")
         self.prepared, self.gripper, self.work_dir = prepared, gripper, work_dir
         self.policy = get_policy(settings.policy_name)
         k = settings.physics.mujoco_substeps
         self.substeps = k
         # The step counts the policy reads, scaled to keep their duration (module docstring);
         # model_copy skips validation, so a scaled count may pass the spec's upper bound.
-        self.run_settings = settings.model_copy(update={"policy": settings.policy.model_copy(
-            update={"check_every_steps": settings.policy.check_every_steps * k})})
+        self.run_settings = settings.model_copy(update={
+            "policy": settings.policy.model_copy(
+                update={"check_every_steps": settings.policy.check_every_steps * k}),
+            "haptic": settings.haptic.model_copy(
+                update={"steps_per_iteration": settings.haptic.steps_per_iteration * k})})
         dt = settings.physics.dt / k
         offset = np.array(world_offset, dtype=float)
         self.world, model = load_world(prepared, gripper, dt, offset, work_dir)

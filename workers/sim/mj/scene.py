@@ -12,6 +12,8 @@ The hand's own weight is compensated (`gravcomp`), as a stiff pybullet drive car
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import mujoco
@@ -49,6 +51,12 @@ class MjScene:
         self._err = np.zeros(6)
         self._w2, self._2w = DRIVE_BANDWIDTH_RAD_S**2, 2.0 * DRIVE_BANDWIDTH_RAD_S
         self._link = world.geom_link
+        colliding = (self.model.geom_contype != 0) | (self.model.geom_conaffinity != 0)
+        self._object_geoms = np.flatnonzero(colliding & (world.geom_link == -2)
+                                            & (self.model.geom_bodyid == world.object_body))
+        self._link_geoms = {link: np.flatnonzero(colliding & (world.geom_link == link))
+                            for link in set(world.link_index.values())}
+        self._joint_of = {hand.joint_by_name[name]: j for name, j in world.joint_ids.items()}
 
     def calibrate_drive(self) -> None:
         """The palm block of the mass matrix at the present (open) configuration."""
@@ -168,3 +176,64 @@ class MjScene:
             return False
         hand = self._link[d.contact.geom] != -2
         return bool(np.any((d.contact.dist < -tolerance) & (hand[:, 0] != hand[:, 1])))
+
+    # --- probes: the haptic policy's proximity sensors and finite differences -------------
+    def link_distances(self, links: list[int], max_distance: float) -> np.ndarray:
+        """Each link's distance to the object (the least over their geoms' pairs,
+        mj_geomDistance on the positions now), `max_distance` beyond it."""
+        m, d = self.model, self.data
+        mujoco.mj_kinematics(m, d)
+        out = np.full(len(links), float(max_distance))
+        for i, link in enumerate(links):
+            for g in self._link_geoms.get(link, ()):
+                for o in self._object_geoms:
+                    out[i] = min(out[i], mujoco.mj_geomDistance(m, d, int(g), int(o),
+                                                                max_distance, None))
+        return out
+
+    def joint_limits(self, joints: list[int]) -> np.ndarray:
+        return np.array([self.model.jnt_range[self._joint_of[j]] for j in joints])
+
+    def joint_positions(self, joints: list[int]) -> np.ndarray:
+        return np.array([self.data.qpos[self.model.jnt_qposadr[self._joint_of[j]]]
+                         for j in joints])
+
+    def parent_link(self, link: int) -> int:
+        """The link `link` hangs on (−1: the palm), past any rigid bodies between."""
+        body = int(self.model.jnt_bodyid[self._joint_of[link]])
+        index = self.world.link_index
+        body = int(self.model.body_parentid[body])
+        while body not in index and body != 0:
+            body = int(self.model.body_parentid[body])
+        return index.get(body, -1)
+
+    @contextmanager
+    def _probing(self) -> Iterator[Callable[[], None]]:
+        """Yields `put_back`, which copies the whole mjData of entry back (its derived fields
+        too: after mj_step they lag the positions by a step, and the drive reads them);
+        called on leaving too."""
+        saved = mujoco.MjData(self.model)
+        mujoco.mj_copyData(saved, self.model, self.data)
+
+        def put_back() -> None:
+            mujoco.mj_copyData(self.data, self.model, saved)
+
+        try:
+            yield put_back
+        finally:
+            put_back()
+
+    def probing_joints(self):
+        return self._probing()
+
+    @contextmanager
+    def probing_base(self) -> Iterator[None]:
+        with self._probing():
+            yield
+
+    def teleport_joint(self, joint: int, q: float) -> None:
+        self.hand.set_joint(joint, q)
+
+    def teleport_frame(self, position: np.ndarray, rotation: np.ndarray) -> None:
+        x, y, z, w = quat_from_matrix(rotation)
+        self.data.qpos[self.world.palm_qpos] = [*position, w, x, y, z]
