@@ -7,7 +7,9 @@ MuJoCo: the same rate × 2 substeps, a 2.08 ms step) and at a finer time step (p
 per evaluation, the share of CPU inside the engine's step (pybullet.stepSimulation,
 mujoco.mj_step), and each engine's agreement with its own finer reference (the same viability
 and, where held, the same grasp type). The engines alternate (pybullet, MuJoCo, MuJoCo,
-pybullet, ...) so both see the same machine load.
+pybullet, ...) so both see the same machine load. With `--converge`, each engine also runs at a
+quarter of its step (pybullet 960 Hz; MuJoCo 8 substeps, 0.52 ms): the chosen step's
+agreement with it and the half step's, on viability and grasp type and on viability alone.
 """
 
 from __future__ import annotations
@@ -53,14 +55,16 @@ class Clock:
         setattr(self.module, self.name, self._step)
 
 
-def settings_for(engine: str, fine: bool) -> SimSettings:
+def settings_for(engine: str, fine: bool, finer: int = 2) -> SimSettings:
+    """The chosen settings, or (`fine`) the step divided by `finer`."""
     base = SimSettings(engine=engine)
     if not fine:
         return base
     if engine == "pybullet":
-        physics = base.physics.model_copy(update={"rate_hz": 480.0})
+        physics = base.physics.model_copy(update={"rate_hz": base.physics.rate_hz * finer})
     else:
-        physics = base.physics.model_copy(update={"mujoco_substeps": 4})
+        physics = base.physics.model_copy(
+            update={"mujoco_substeps": base.physics.mujoco_substeps * finer})
     return base.model_copy(update={"physics": physics})
 
 
@@ -88,8 +92,30 @@ def agree(a: PoseResult, b: PoseResult) -> bool:
     return not a.viable or same_grasp_type(a.signature, b.signature)
 
 
+def share(a: list[PoseResult], b: list[PoseResult], outcome_only: bool = False) -> float:
+    """The share of poses on which two runs agree (or only on viability)."""
+    return float(np.mean([x.viable == y.viable if outcome_only else agree(x, y)
+                          for x, y in zip(a, b, strict=True)]))
+
+
+def convergence(obj: ObjectSpec, poses: list[Pose], engine: str, chosen: list[PoseResult],
+                fine: list[PoseResult]) -> dict[str, float]:
+    """Each engine against its own step ÷ 4 as well as ÷ 2: the chosen step's agreement with
+    both references (viable and grasp type; viability alone), and the ÷ 2 step's with the ÷ 4
+    one, which says whether the outcomes settle as the step shrinks."""
+    finest, timing = run(obj, settings_for(engine, fine=True, finer=4), poses)
+    print(f"{engine} step ÷ 4: {timing['wall_s']:.1f} s", flush=True)
+    return {
+        f"same_outcome_with_finer_step_{engine}": share(chosen, fine, True),
+        f"agreement_with_step_quarter_{engine}": share(chosen, finest),
+        f"same_outcome_with_step_quarter_{engine}": share(chosen, finest, True),
+        f"agreement_half_step_with_quarter_{engine}": share(fine, finest),
+        f"same_outcome_half_step_with_quarter_{engine}": share(fine, finest, True),
+    }
+
+
 def side_by_side(obj: ObjectSpec, poses: list[Pose], engines: list[str],
-                 rounds: int = 2) -> dict[str, float]:
+                 rounds: int = 2, converge: bool = False) -> dict[str, float]:
     timings: dict[str, list[dict]] = {e: [] for e in engines}
     results: dict[str, list[PoseResult]] = {}
     for k in range(rounds):
@@ -114,6 +140,8 @@ def side_by_side(obj: ObjectSpec, poses: list[Pose], engines: list[str],
             f"agreement_with_finer_step_{engine}": float(np.mean(
                 [agree(a, b) for a, b in zip(results[engine], fine, strict=True)])),
         })
+        if converge:
+            figures.update(convergence(obj, poses, engine, results[engine], fine))
     if {"pybullet", "mujoco"} <= set(engines):
         figures["mujoco_speedup"] = (figures["evals_per_s_per_core_mujoco"]
                                      / figures["evals_per_s_per_core_pybullet"])
