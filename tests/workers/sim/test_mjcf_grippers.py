@@ -127,3 +127,10 @@ def test_gripper_check_in_mujoco_finds_no_problem(name: str, sim_cache: Path) ->
     assert not report.problems, report.problems
     assert all(t.viable for t in report.trials if t.object == "sphere")
     assert abs(report.reach_m - report.declared_reach_m) < 0.005
+
+
+def test_explore_refuses_an_mjcf_gripper_without_the_mujoco_engine(capsys) -> None:
+    from graspscape.services.local.cli import main
+
+    assert main(["explore", "sphere", "--gripper", "menagerie_franka_hand"]) == 2
+    assert "--engine mujoco" in capsys.readouterr().err
