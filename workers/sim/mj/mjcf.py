@@ -28,7 +28,7 @@ import mujoco
 import numpy as np
 from graspscape.shared.specs.gripper import AnyGripperSpec, MjcfGripperSpec
 from graspscape.shared.specs.gripper_frames import palm_in_base_link
-from graspscape.workers.sim.gripper.model import HandModel
+from graspscape.workers.sim.gripper.model import HandModel, hand_model
 from graspscape.workers.sim.gripper.urdf_import import (
     GripperFileError,
     JointLayout,
@@ -56,8 +56,6 @@ def load_world(prepared: PreparedObject, gripper: AnyGripperSpec, dt: float,
     """The world of one evaluation and the hand's layout, for any gripper description."""
     if isinstance(gripper, MjcfGripperSpec):
         return build_mjcf_world(prepared, gripper, dt, offset)
-    from graspscape.workers.sim.gripper.model import hand_model
-
     model = hand_model(gripper, work_dir / "urdf")
     return build_world(prepared, model, dt, offset), model
 
