@@ -9,6 +9,7 @@ import shutil
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 from graspscape.shared.specs.gripper import MjcfGripperSpec, list_grippers, load_gripper
 from graspscape.shared.specs.objects import ObjectSpec
@@ -134,3 +135,27 @@ def test_explore_refuses_an_mjcf_gripper_without_the_mujoco_engine(capsys) -> No
 
     assert main(["explore", "sphere", "--gripper", "menagerie_franka_hand"]) == 2
     assert "--engine mujoco" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("turn", [0.0, math.pi / 2, 2.5])
+def test_the_arm_drive_holds_a_turned_hand_still(small_sphere, sim_cache: Path,
+                                                 turn: float) -> None:
+    """The 2F-85's centre of mass lies 5 cm behind its palm: however the hand is turned, the
+    drive holds it where it is told (the block of the mass matrix coupling the palm's linear
+    and angular motion turns with the palm)."""
+    from scipy.spatial.transform import Rotation
+
+    evaluator = make_evaluator(small_sphere, load_gripper("menagerie_robotiq_2f85"), MUJOCO,
+                               work_dir=sim_cache)
+    evaluator._reset()
+    scene, data = evaluator.scene, evaluator.data
+    rotation = Rotation.from_rotvec([turn, 0.3 * turn, 0.0]).as_matrix()
+    target = scene.offset + np.array([0.0, 0.0, 0.5])
+    scene.place_hand(target, rotation)
+    for _ in range(200):  # 0.4 s
+        scene.drive_to(target, rotation)
+        scene.step()
+    position, now = scene.hand.frame_pose()
+    assert float(abs(data.qvel[evaluator.world.palm_dofs]).max()) < 1e-3
+    assert float(abs(position - target).max()) < 1e-4
+    assert Rotation.from_matrix(now @ rotation.T).magnitude() < 1e-3
