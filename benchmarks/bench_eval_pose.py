@@ -235,7 +235,7 @@ def engines_side_by_side(args: argparse.Namespace, load_before: tuple) -> None:
     except ModuleNotFoundError:
         from eval_pose_engines import side_by_side
     figures = side_by_side(ObjectSpec(name=args.object), pose_grid(),
-                           args.engine.split(","), args.rounds)
+                           args.engine.split(","), args.rounds, converge=args.converge)
     extra = {"object": args.object, "load_average_start": list(load_before),
              "load_average_end": list(os.getloadavg())}
     if not args.no_write:
@@ -258,6 +258,8 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2, help="runs of each tree (--against)")
     parser.add_argument("--engine", help="engines side by side, e.g. pybullet,mujoco: written "
                         "to eval_pose_engines.json (eval_pose_engines.py)")
+    parser.add_argument("--converge", action="store_true", help="with --engine: each engine "
+                        "also at a quarter of its step, against its own finer references")
     args = parser.parse_args()
     load_before = os.getloadavg()
     if args.engine:

@@ -3,11 +3,14 @@
 
 On the same pose grid, each engine at its chosen settings (pybullet: 240 Hz, 50 iterations;
 MuJoCo: the same rate × 2 substeps, a 2.08 ms step) and at a finer time step (pybullet
-480 Hz; MuJoCo 4 substeps, 1.04 ms): evaluations per second on one core, CPU-seconds, steps
+480 Hz; MuJoCo 4 substeps, 1.04 ms): evaluations per second on one core (the best round's
+wall clock), evaluations per CPU-second (all rounds; and at the finer step), steps
 per evaluation, the share of CPU inside the engine's step (pybullet.stepSimulation,
 mujoco.mj_step), and each engine's agreement with its own finer reference (the same viability
 and, where held, the same grasp type). The engines alternate (pybullet, MuJoCo, MuJoCo,
-pybullet, ...) so both see the same machine load.
+pybullet, ...) so both see the same machine load. With `--converge`, each engine also runs at a
+quarter of its step (pybullet 960 Hz; MuJoCo 8 substeps, 0.52 ms): the chosen step's
+agreement with it and the half step's, on viability and grasp type and on viability alone.
 """
 
 from __future__ import annotations
@@ -53,14 +56,16 @@ class Clock:
         setattr(self.module, self.name, self._step)
 
 
-def settings_for(engine: str, fine: bool) -> SimSettings:
+def settings_for(engine: str, fine: bool, finer: int = 2) -> SimSettings:
+    """The chosen settings, or (`fine`) the step divided by `finer`."""
     base = SimSettings(engine=engine)
     if not fine:
         return base
     if engine == "pybullet":
-        physics = base.physics.model_copy(update={"rate_hz": 480.0})
+        physics = base.physics.model_copy(update={"rate_hz": base.physics.rate_hz * finer})
     else:
-        physics = base.physics.model_copy(update={"mujoco_substeps": 4})
+        physics = base.physics.model_copy(
+            update={"mujoco_substeps": base.physics.mujoco_substeps * finer})
     return base.model_copy(update={"physics": physics})
 
 
@@ -88,8 +93,30 @@ def agree(a: PoseResult, b: PoseResult) -> bool:
     return not a.viable or same_grasp_type(a.signature, b.signature)
 
 
+def share(a: list[PoseResult], b: list[PoseResult], outcome_only: bool = False) -> float:
+    """The share of poses on which two runs agree (or only on viability)."""
+    return float(np.mean([x.viable == y.viable if outcome_only else agree(x, y)
+                          for x, y in zip(a, b, strict=True)]))
+
+
+def convergence(obj: ObjectSpec, poses: list[Pose], engine: str, chosen: list[PoseResult],
+                fine: list[PoseResult]) -> dict[str, float]:
+    """Each engine against its own step ÷ 4 as well as ÷ 2: the chosen step's agreement with
+    both references (viable and grasp type; viability alone), and the ÷ 2 step's with the ÷ 4
+    one, which says whether the outcomes settle as the step shrinks."""
+    finest, timing = run(obj, settings_for(engine, fine=True, finer=4), poses)
+    print(f"{engine} step ÷ 4: {timing['wall_s']:.1f} s", flush=True)
+    return {
+        f"same_outcome_with_finer_step_{engine}": share(chosen, fine, True),
+        f"agreement_with_step_quarter_{engine}": share(chosen, finest),
+        f"same_outcome_with_step_quarter_{engine}": share(chosen, finest, True),
+        f"agreement_half_step_with_quarter_{engine}": share(fine, finest),
+        f"same_outcome_half_step_with_quarter_{engine}": share(fine, finest, True),
+    }
+
+
 def side_by_side(obj: ObjectSpec, poses: list[Pose], engines: list[str],
-                 rounds: int = 2) -> dict[str, float]:
+                 rounds: int = 2, converge: bool = False) -> dict[str, float]:
     timings: dict[str, list[dict]] = {e: [] for e in engines}
     results: dict[str, list[PoseResult]] = {}
     for k in range(rounds):
@@ -102,11 +129,14 @@ def side_by_side(obj: ObjectSpec, poses: list[Pose], engines: list[str],
     figures: dict[str, float] = {"poses": n, "rounds": rounds}
     for engine in engines:
         ts = timings[engine]
-        wall, cpu = sum(t["wall_s"] for t in ts), sum(t["cpu_s"] for t in ts)
+        # Wall clock: the best round, as the other processes of a shared machine only ever
+        # slow a round down; CPU time: all rounds.
+        wall, cpu = min(t["wall_s"] for t in ts), sum(t["cpu_s"] for t in ts)
         step_cpu, steps = sum(t["step_cpu_s"] for t in ts), sum(t["steps"] for t in ts)
-        fine, _ = run(obj, settings_for(engine, fine=True), poses)
+        fine, fine_timing = run(obj, settings_for(engine, fine=True), poses)
         figures.update({
-            f"evals_per_s_per_core_{engine}": rounds * n / wall,
+            f"evals_per_s_per_core_{engine}": n / wall,
+            f"evals_per_cpu_s_half_step_{engine}": n / fine_timing["cpu_s"],
             f"evals_per_cpu_s_{engine}": rounds * n / cpu,
             f"steps_per_eval_{engine}": steps / (rounds * n),
             f"step_share_of_cpu_{engine}": step_cpu / cpu,
@@ -114,11 +144,17 @@ def side_by_side(obj: ObjectSpec, poses: list[Pose], engines: list[str],
             f"agreement_with_finer_step_{engine}": float(np.mean(
                 [agree(a, b) for a, b in zip(results[engine], fine, strict=True)])),
         })
+        if converge:
+            figures.update(convergence(obj, poses, engine, results[engine], fine))
     if {"pybullet", "mujoco"} <= set(engines):
         figures["mujoco_speedup"] = (figures["evals_per_s_per_core_mujoco"]
                                      / figures["evals_per_s_per_core_pybullet"])
         figures["mujoco_speedup_cpu"] = (figures["evals_per_cpu_s_mujoco"]
                                          / figures["evals_per_cpu_s_pybullet"])
+        # MuJoCo at half its step (where it agrees with its own finer reference) against
+        # pybullet at its chosen settings.
+        figures["mujoco_half_step_speedup_cpu"] = (figures["evals_per_cpu_s_half_step_mujoco"]
+                                                   / figures["evals_per_cpu_s_pybullet"])
         figures["agreement_between_engines"] = float(np.mean(
             [agree(a, b) for a, b in zip(results["pybullet"], results["mujoco"], strict=True)]))
     return figures

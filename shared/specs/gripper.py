@@ -1,6 +1,7 @@
 """The gripper spec formats: a palm and fingers made of phalanges (a TOML of boxes, generic
 enough for any serial-finger gripper: the Robotiq 3-finger hand, a parallel-jaw gripper, ...),
-or a vendor's URDF plus a short description of it (`UrdfGripperSpec`, docs/howto/add-gripper.md).
+or a vendor's URDF plus a short description of it (`UrdfGripperSpec`, docs/howto/add-gripper.md),
+or a vendor's MJCF plus the same kind of description (`MjcfGripperSpec`: MuJoCo engine only).
 
 Frames: the gripper base frame has its origin at the centre of the palm surface and +z along
 the palm normal, pointing out of the palm toward where the fingers reach. Each finger has a
@@ -220,7 +221,64 @@ class UrdfGripperSpec(BaseModel):
         return self.reach_m
 
 
-AnyGripperSpec = GripperSpec | UrdfGripperSpec
+class MjcfFingerSpec(BaseModel):
+    """One finger of an MJCF gripper: the joints the closing sequence commands, and the joints
+    the model's own constraints move (a linkage's passive joints), which count for this digit."""
+
+    model_config = ConfigDict(frozen=True)
+
+    name: str
+    joints: tuple[UrdfJointSpec, ...] = Field(min_length=1)
+    passive: tuple[str, ...] = Field(default=(), description="joints moved by the MJCF's "
+                                     "equality constraints, tendons or springs")
+
+    @model_validator(mode="after")
+    def _checked(self) -> MjcfFingerSpec:
+        if not _FINGER_NAME.match(self.name):
+            raise ValueError(f"finger name {self.name!r}: letters only (it names a digit)")
+        if any(j.mimic is not None for j in self.joints):
+            raise ValueError(f"finger {self.name}: an MJCF couples joints itself (equality "
+                             "constraints, tendons); mimic is for URDF grippers")
+        return self
+
+
+class MjcfGripperSpec(BaseModel):
+    """A gripper from a vendor's MJCF (MuJoCo Menagerie's, say) plus this description (the
+    folder's gripper.toml, with kind = "mjcf"). Only the MuJoCo engine loads it."""
+
+    model_config = ConfigDict(frozen=True)
+
+    kind: Literal["mjcf"] = "mjcf"
+    name: str
+    description: str = ""
+    source: str = Field(default="", description="where the MJCF and meshes come from")
+    licence: str = Field(default="", description="their licence (a file in the folder)")
+    folder: Path = Field(description="the gripper's folder; every file it uses lies inside")
+    mjcf: str = Field(description="the MJCF file, relative to the folder")
+    base_body: str = Field(description="the hand's root body; the palm frame is given in it")
+    actuator: str = Field(description="the MJCF's actuator that closes the hand (its "
+                          "transmission, a joint or a tendon, is kept; its gains are the "
+                          "closing sequence's)")
+    palm: PalmFrameSpec = PalmFrameSpec()
+    fingers: tuple[MjcfFingerSpec, ...] = Field(min_length=1)
+    closing_effort: float = Field(gt=0, description="N·m or N on each finger joint")
+    spread_modes: dict[str, float] = Field(default_factory=lambda: {"basic": 0.0})
+    reach_m: float = Field(gt=0)
+
+    @model_validator(mode="after")
+    def _unique(self) -> MjcfGripperSpec:
+        names = [f.name for f in self.fingers]
+        joints = [j.joint for f in self.fingers for j in f.joints] + [
+            j for f in self.fingers for j in f.passive]
+        if len(set(names)) != len(names) or len(set(joints)) != len(joints):
+            raise ValueError("finger names and joint names must be unique")
+        return self
+
+    def reach(self) -> float:
+        return self.reach_m
+
+
+AnyGripperSpec = GripperSpec | UrdfGripperSpec | MjcfGripperSpec
 
 # A gripper stored on the coordinator (POST /grippers, or packed at submit): the spec names it
 # by the content hash of its archive (shared/specs/gripper_archive.py).
@@ -317,10 +375,12 @@ def unknown_gripper_message(name_or_path: str) -> str:
             f"(searched {where}; add folders with {GRIPPER_PATH_ENV})")
 
 
-def load_urdf_gripper(folder: Path) -> UrdfGripperSpec:
+def load_urdf_gripper(folder: Path) -> UrdfGripperSpec | MjcfGripperSpec:
+    """A gripper folder's description: a URDF's, or an MJCF's (kind = "mjcf")."""
     with (folder / URDF_DESCRIPTION).open("rb") as fh:
         data = tomllib.load(fh)
-    return UrdfGripperSpec.model_validate({**data, "folder": folder.resolve()})
+    cls = MjcfGripperSpec if data.get("kind") == "mjcf" else UrdfGripperSpec
+    return cls.model_validate({**data, "folder": folder.resolve()})
 
 
 def load_gripper(name_or_path: str) -> AnyGripperSpec:

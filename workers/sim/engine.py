@@ -3,7 +3,8 @@
 Policies, the start pose and the metrics act on a *scene* and its *hand* through the methods
 below; `workers/sim/scene.py` + `gripper/hand.py` implement them on pybullet, `mj/scene.py` +
 `mj/hand.py` on MuJoCo. The engine-specific rest (loading, saved states, the trajectory's
-release and gravity, the μs probes' rollouts) lives in each engine's evaluator:
+release and gravity, the μs probes' rollouts, the robustness tests' trials: robustness.py's
+BulletTrials, mj/robustness.py's MjTrials) lives in each engine's evaluator:
 `evaluate.Evaluator` (pybullet) and `mj/evaluate.MjEvaluator`. `make_evaluator` picks one by
 `SimSettings.engine`; nothing else branches on the engine.
 """
@@ -11,6 +12,7 @@ release and gravity, the μs probes' rollouts) lives in each engine's evaluator:
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Callable
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
@@ -58,6 +60,16 @@ class SceneLike(Protocol):
     # A P(success) draw's friction and mass scales, put back when the block ends (samples.py).
     def scaled_object(self, friction: float, mass: float
                       ) -> AbstractContextManager[None]: ...
+
+    # The haptic policy's proximity sensors and finite-difference probes.
+    def link_distances(self, links: list[int], max_distance: float) -> np.ndarray: ...
+    def joint_limits(self, joints: list[int]) -> np.ndarray: ...
+    def joint_positions(self, joints: list[int]) -> np.ndarray: ...
+    def parent_link(self, link: int) -> int: ...
+    def probing_joints(self) -> AbstractContextManager[Callable[[], None]]: ...
+    def probing_base(self) -> AbstractContextManager[None]: ...
+    def teleport_joint(self, joint: int, q: float) -> None: ...
+    def teleport_frame(self, position: np.ndarray, rotation: np.ndarray) -> None: ...
 
 
 def available_engines() -> tuple[str, ...]:

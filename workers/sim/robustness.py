@@ -63,93 +63,29 @@ object touches no link after the settle.
 
 from __future__ import annotations
 
-import math
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
 from graspscape.shared.specs.results import PhaseTimes, RobustnessReport
 from graspscape.shared.specs.robustness import RobustnessSettings
+from graspscape.workers.sim import grasp_tests
 from graspscape.workers.sim.bullet import (
     get_constraint_info,
     get_dynamics_info,
     restore_state_clean,
     save_state,
 )
-from scipy.spatial.transform import Rotation
-
-# --- pure helpers ------------------------------------------------------------------------
-
-
-def directions() -> np.ndarray:
-    """The six unit directions +x, −x, +y, −y, +z, −z (rows)."""
-    return np.vstack([sign * axis for axis in np.eye(3) for sign in (1.0, -1.0)])
-
-
-def relative_pose(hand_pos: np.ndarray, hand_rot: np.ndarray, obj_pos: np.ndarray,
-                  obj_rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The object's pose in the hand frame."""
-    return hand_rot.T @ (obj_pos - hand_pos), hand_rot.T @ obj_rot
-
-
-def displacement(rest: tuple[np.ndarray, np.ndarray],
-                 now: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
-    """Distance (m) and angle (rad) between two relative poses of the object in the hand."""
-    moved = float(np.linalg.norm(now[0] - rest[0]))
-    turned = float(Rotation.from_matrix(now[1] @ rest[1].T).magnitude())
-    return moved, turned
-
-
-def lowest_holding(holds: Callable[[float], bool], lo: float, hi: float, trials: int,
-                   hi_holds: bool | None = None) -> float | None:
-    """The lowest value in [lo, hi] at which `holds`, by bisection in at most `trials` trials
-    (a known `hi_holds` counts as the first, run elsewhere): None if `hi` does not hold, `lo`
-    if `lo` does, else the lowest value seen to hold. Assumes holding is monotone in it."""
-    if hi_holds is None:
-        hi_holds = holds(hi)
-    if not hi_holds:
-        return None
-    used = 2  # hi (run here or known) and lo
-    if holds(lo):
-        return lo
-    while used < trials:
-        mid = 0.5 * (lo + hi)
-        used += 1
-        if holds(mid):
-            hi = mid
-        else:
-            lo = mid
-    return hi
-
-
-def torque_ratio(tau_min: float | None, tau_c: float) -> float | None:
-    """1 − τ_min/τ_c: 1 holds with almost no effort, 0 needs all of it."""
-    return None if tau_min is None else 1.0 - tau_min / tau_c
-
-
-def ramp(t: float, top: float, ramp_s: float) -> float:
-    """A linear ramp from 0 at t = 0 to `top` at `ramp_s`, flat after."""
-    return top * min(1.0, max(0.0, t / ramp_s))
-
-
-def shake_timing(frequency_hz: float, axis_s: float) -> float:
-    """Time per axis, rounded to whole periods (at least one)."""
-    return max(1, round(axis_s * frequency_hz)) / frequency_hz
-
-
-def shake_offset(t: float, amplitude_m: float, frequency_hz: float, axis_s: float) -> np.ndarray:
-    """World displacement of the hand at time t into the shake: A(1 − cos 2πft) along x, then
-    y, then z, `axis_s` (rounded to whole periods) each; zero before and after."""
-    per_axis = shake_timing(frequency_hz, axis_s)
-    axis = math.floor(t / per_axis) if t >= 0.0 else 3
-    offset = np.zeros(3)
-    if axis < 3:
-        tau = t - axis * per_axis
-        offset[axis] = amplitude_m * (1.0 - math.cos(2.0 * math.pi * frequency_hz * tau))
-    return offset
-
+from graspscape.workers.sim.robustness_math import (  # noqa: F401 (the tests' names, here too)
+    directions,
+    displacement,
+    lowest_holding,
+    ramp,
+    relative_pose,
+    shake_offset,
+    shake_timing,
+    torque_ratio,
+)
 
 # --- the synthesized grasp --------------------------------------------------------------
 
@@ -193,9 +129,7 @@ def capture_grasp(scene) -> SynthesizedGrasp:
     )
 
 
-# --- hold-still tests -------------------------------------------------------------------
-
-Exceeded = Callable[[float, float], bool]
+# --- restoring a grasp ----------------------------------------------------------------
 
 
 def restore_grasp(evaluator, grasp: SynthesizedGrasp, *, effort: float | None = None) -> None:
@@ -238,162 +172,43 @@ def holds_along_trajectory(evaluator, grasp: SynthesizedGrasp, *, effort: float 
     return held
 
 
-def _hold_still(evaluator, grasp: SynthesizedGrasp, *, gravity: np.ndarray, settle_s: float,
-                steps: int, exceeded: Exceeded,
-                force: Callable[[int], np.ndarray] | None = None,
-                offset: Callable[[int], np.ndarray] | None = None) -> int | None:
-    """Restores the grasp, lets the fixture go with `gravity` on, holds the hand still for
-    the settle, then runs `steps` steps with `force(step)` (world, N) on the object's centre of
-    mass and the hand driven to its pose + `offset(step)` (world). Returns the first step at
-    which `exceeded(distance, angle)` of the object in the hand since the settle (−1 where the
-    object touches no link after the settle), or None if it never is."""
-    scene, cid, hand = evaluator.scene, evaluator.client, evaluator.scene.hand
-    restore_grasp(evaluator, grasp)
-    p.changeConstraint(scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
-    p.setGravity(*gravity.tolist(), physicsClientId=cid)
-    hold_pos, hold_rot = hand.frame_pose()
-    scene.drive_to(hold_pos, hold_rot)
-    for _ in range(round(settle_s / scene.dt)):
-        scene.step()
-    if not scene.in_contact():
-        return -1
-    rest = relative_pose(*hand.frame_pose(), *scene.object_pose())
-    for step in range(steps):
-        if offset is not None:
-            scene.drive_to(hold_pos + offset(step), hold_rot)
-        if force is not None:
-            p.applyExternalForce(scene.object_body, -1, force(step).tolist(),
-                                 scene.object_pose()[0].tolist(), p.WORLD_FRAME,
-                                 physicsClientId=cid)
-        scene.step()
-        now = relative_pose(*hand.frame_pose(), *scene.object_pose())
-        if exceeded(*displacement(rest, now)):
-            return step
-    return None
+# --- the tests, through pybullet's trials ------------------------------------------------
 
 
-def _load_directions(grasp: SynthesizedGrasp, settings: RobustnessSettings) -> np.ndarray:
-    rows = directions()
-    return rows @ grasp.frame_rotation.T if settings.load_frame == "hand" else rows
+@dataclass
+class BulletTrials:
+    """grasp_tests.GraspTrials on pybullet: the synthesized grasp restored from a saved state,
+    the fixture a constraint whose force cap drops to 0, the load an external force."""
 
+    evaluator: object
+    grasp: SynthesizedGrasp
 
-def gravity_test(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings) -> float:
-    """Share of the six gravity directions in which the object stays in the hand."""
-    s = settings
-    steps = round(s.gravity_duration_s / evaluator.scene.dt)
+    def __post_init__(self) -> None:
+        self.scene = self.evaluator.scene
+        g = self.grasp
+        self.effort, self.friction, self.mass_kg = g.effort, g.friction, g.mass_kg
+        self.frame_rotation = g.frame_rotation
 
-    def exceeded(moved: float, turned: float) -> bool:
-        return moved >= s.gravity_max_shift_m or turned >= s.gravity_max_turn_rad
+    def restore(self) -> None:
+        restore_grasp(self.evaluator, self.grasp)
 
-    passed = [_hold_still(evaluator, grasp, gravity=s.gravity_m_s2 * d, settle_s=s.settle_s,
-                          steps=steps, exceeded=exceeded) is None
-              for d in _load_directions(grasp, s)]
-    return sum(passed) / len(passed)
+    def release(self, gravity: np.ndarray) -> None:
+        cid = self.evaluator.client
+        p.changeConstraint(self.scene.fixture_constraint, maxForce=0.0, physicsClientId=cid)
+        p.setGravity(*gravity.tolist(), physicsClientId=cid)
 
+    def push(self, force: np.ndarray) -> None:
+        p.applyExternalForce(self.scene.object_body, -1, force.tolist(),
+                             self.scene.object_pose()[0].tolist(), p.WORLD_FRAME,
+                             physicsClientId=self.evaluator.client)
 
-def force_test(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings) -> float:
-    """Share of the six directions in which the object resists a force of `force_weights`
-    object weights without gravity."""
-    s = settings
-    steps = round(s.force_duration_s / evaluator.scene.dt)
-    magnitude = s.force_weights * grasp.mass_kg * s.gravity_m_s2
-
-    def exceeded(moved: float, turned: float) -> bool:
-        return moved >= s.force_max_shift_m or turned >= s.force_max_turn_rad
-
-    passed = []
-    for d in _load_directions(grasp, s):
-        load = magnitude * d
-        passed.append(_hold_still(evaluator, grasp, gravity=np.zeros(3), settle_s=s.settle_s,
-                                  steps=steps, exceeded=exceeded,
-                                  force=lambda _step, load=load: load) is None)
-    return sum(passed) / len(passed)
-
-
-def tug_test(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings) -> float:
-    """The pull along the approach axis (N) at which the object slips out of the hand."""
-    s = settings
-    dt = evaluator.scene.dt
-    top = s.tug_max_weights * grasp.mass_kg * s.gravity_m_s2
-    axis = grasp.frame_rotation[:, 2]  # the approach axis, palm → object
-
-    def pull(step: int) -> float:
-        return ramp((step + 1) * dt, top, s.tug_ramp_s)
-
-    slipped = _hold_still(evaluator, grasp, gravity=np.zeros(3), settle_s=s.settle_s,
-                          steps=round(s.tug_ramp_s / dt),
-                          exceeded=lambda moved, _turned: moved >= s.tug_slip_m,
-                          force=lambda step: pull(step) * axis)
-    if slipped is None:
-        return top
-    return 0.0 if slipped < 0 else pull(slipped)
-
-
-def shake_test(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings) -> float:
-    """Time into the shake (s) at which the object falls off; the full duration if never."""
-    s = settings
-    dt = evaluator.scene.dt
-    duration = 3 * shake_timing(s.shake_frequency_hz, s.shake_axis_s)
-    fell = _hold_still(
-        evaluator, grasp, gravity=np.array([0.0, 0.0, -s.gravity_m_s2]), settle_s=s.settle_s,
-        steps=round(duration / dt), exceeded=lambda moved, _turned: moved >= s.shake_fall_m,
-        offset=lambda step: shake_offset((step + 1) * dt, s.shake_amplitude_m,
-                                         s.shake_frequency_hz, s.shake_axis_s))
-    if fell is None:
-        return duration
-    return 0.0 if fell < 0 else (fell + 1) * dt
-
-
-# --- margins ----------------------------------------------------------------------------
-
-
-def torque_margin(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings,
-                  nominal: bool | None = None) -> float | None:
-    """Least closing effort (N·m) at which the synthesized grasp still holds."""
-    return lowest_holding(lambda tau: holds_along_trajectory(evaluator, grasp, effort=tau),
-                          settings.torque_lo_fraction * grasp.effort, grasp.effort,
-                          settings.margin_trials, hi_holds=nominal)
-
-
-def friction_margin(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings,
-                    nominal: bool | None = None) -> float | None:
-    """Least lateral friction coefficient of the object at which the grasp still holds."""
-    hi = grasp.friction
-    lo = min(settings.friction_lo, hi)
-    return lowest_holding(lambda mu: holds_along_trajectory(evaluator, grasp, friction=mu),
-                          lo, hi, settings.margin_trials, hi_holds=nominal)
+    def holds(self, *, effort: float | None = None, friction: float | None = None) -> bool:
+        return holds_along_trajectory(self.evaluator, self.grasp, effort=effort,
+                                      friction=friction)
 
 
 def run_tests(evaluator, grasp: SynthesizedGrasp, settings: RobustnessSettings,
               times: dict[str, float] | None = None) -> RobustnessReport:
-    """Runs the tests `settings` chooses on `grasp`; `times`, if given, gets each test's
-    wall time (s; the nominal trajectory shared by the margins is its own entry)."""
-    out: dict[str, float | None] = {}
-
-    def timed(name: str, fn: Callable[[], float | None]) -> float | None:
-        t0 = time.perf_counter()
-        value = fn()
-        if times is not None:
-            times[name] = time.perf_counter() - t0
-        return value
-
-    nominal = None
-    if settings.runs("torque_margin") or settings.runs("friction_margin"):
-        nominal = timed("nominal", lambda: holds_along_trajectory(evaluator, grasp))
-    if settings.runs("torque_margin"):
-        tau = timed("torque_margin", lambda: torque_margin(evaluator, grasp, settings, nominal))
-        out["torque_margin_nm"] = tau
-        out["torque_margin_ratio"] = torque_ratio(tau, grasp.effort)
-    if settings.runs("friction_margin"):
-        out["friction_margin"] = timed(
-            "friction_margin", lambda: friction_margin(evaluator, grasp, settings, nominal))
-    if settings.runs("gravity"):
-        out["gravity_test_share"] = timed(
-            "gravity", lambda: gravity_test(evaluator, grasp, settings))
-    if settings.runs("force"):
-        out["force_test_share"] = timed("force", lambda: force_test(evaluator, grasp, settings))
-    if settings.runs("tug"):
-        out["tug_force_n"] = timed("tug", lambda: tug_test(evaluator, grasp, settings))
-    if settings.runs("shake"):
-        out["shake_survival_s"] = timed("shake", lambda: shake_test(evaluator, grasp, settings))
-    return RobustnessReport(**out)
+    """Runs the tests `settings` chooses on `grasp` (grasp_tests.run_tests); `times`, if given,
+    gets each test's wall time."""
+    return grasp_tests.run_tests(BulletTrials(evaluator, grasp), settings, times)

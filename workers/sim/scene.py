@@ -4,7 +4,7 @@ Policies and the robustness tests drive it through these methods."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -15,8 +15,12 @@ from graspscape.workers.sim.bullet import (
     get_closest_points,
     get_contact_points,
     get_dynamics_info,
+    get_joint_info,
+    get_joint_positions,
+    get_joint_state,
     get_pose,
     matrix_from_quat,
+    saved_state,
     touching_link_indices,
 )
 from graspscape.workers.sim.geometry import quat_from_matrix
@@ -50,6 +54,7 @@ class Scene:
     # to one rotation every step, which needs converting once.
     _last_rotation: tuple[bytes, list[float]] = field(default=(b"", []), init=False,
                                                       repr=False)
+    _probed: set[int] = field(default_factory=set, init=False, repr=False)
 
     def drive_to(self, position: np.ndarray, rotation: np.ndarray,
                  max_force: float = DRIVE_MAX_FORCE_N) -> None:
@@ -151,3 +156,59 @@ class Scene:
         finally:
             p.changeDynamics(body, -1, lateralFriction=mu, mass=m,
                              localInertiaDiagonal=inertia, physicsClientId=cid)
+
+    # --- probes: the haptic policy's proximity sensors and finite differences -------------
+    def link_distances(self, links: list[int], max_distance: float) -> np.ndarray:
+        """Each link's distance to the object (closest points), `max_distance` beyond it."""
+        out = []
+        for link in links:
+            points = get_closest_points(self.client, self.hand.body, self.object_body,
+                                        max_distance, link_a=link)
+            out.append(min((pt.contact_distance for pt in points), default=max_distance))
+        return np.array(out)
+
+    def joint_limits(self, joints: list[int]) -> np.ndarray:
+        infos = [get_joint_info(self.client, self.hand.body, j) for j in joints]
+        return np.array([(i.joint_lower_limit, i.joint_upper_limit) for i in infos])
+
+    def joint_positions(self, joints: list[int]) -> np.ndarray:
+        return np.array(get_joint_positions(self.client, self.hand.body, joints))
+
+    def parent_link(self, link: int) -> int:
+        """The link `link` hangs on (−1: the palm)."""
+        return get_joint_info(self.client, self.hand.body, link).parent_index
+
+    @contextmanager
+    def probing_joints(self) -> Iterator[Callable[[], None]]:
+        """Yields `put_back`, which returns every joint `teleport_joint` moved to its exact
+        position and velocity at entry (resetJointState restores them bit for bit: a test
+        checks the rollout is unchanged); called on leaving too."""
+        body, cid = self.hand.body, self.client
+        saved = {j: get_joint_state(cid, body, j) for j in self.hand.movable}
+
+        def put_back() -> None:
+            for j in self._probed:
+                p.resetJointState(body, j, saved[j].joint_position, saved[j].joint_velocity,
+                                  physicsClientId=cid)
+            self._probed.clear()
+
+        try:
+            yield put_back
+        finally:
+            put_back()
+
+    def teleport_joint(self, joint: int, q: float) -> None:
+        p.resetJointState(self.hand.body, joint, q, 0.0, physicsClientId=self.client)
+        self._probed.add(joint)
+
+    @contextmanager
+    def probing_base(self) -> Iterator[None]:
+        """The whole state back on leaving: putting the base back with
+        resetBasePositionAndOrientation is off by ~1e-13 (pybullet converts between the link
+        and inertial frames), enough to change a later contact-rich rollout (~1 ms)."""
+        with saved_state(self.client):
+            yield
+
+    def teleport_frame(self, position: np.ndarray, rotation: np.ndarray) -> None:
+        com, orn = self.hand.com_pose_for(position, rotation)
+        p.resetBasePositionAndOrientation(self.hand.body, com, orn, physicsClientId=self.client)

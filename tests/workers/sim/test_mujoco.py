@@ -71,13 +71,6 @@ def test_the_same_pose_gives_the_same_result_twice_in_mujoco(mj_sphere) -> None:
     assert mj_sphere.evaluate(FROM_SIDE).model_dump(exclude=skip) == first
 
 
-def test_mujoco_runs_the_baseline_policy_only(sim_cache, object_cache) -> None:
-    prepared = prepare_object(ObjectSpec(name="sphere"), object_cache)
-    with pytest.raises(ValueError, match="baseline"):
-        make_evaluator(prepared, load_gripper("robotiq_3f"),
-                       SimSettings(engine="mujoco", policy_name="haptic"), work_dir=sim_cache)
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("gripper", ["robotiq_3f_urdf", "franka_hand"])
 def test_urdf_grippers_grasp_the_sphere_in_mujoco(gripper, sim_cache, object_cache) -> None:
@@ -102,7 +95,7 @@ def test_mujoco_measures_the_torque_and_friction_margins(sim_cache, object_cache
     assert tau is not None and 0.0 < tau < effort
     mu = first.robustness.friction_margin
     assert mu is not None and 0.0 < mu < prepared.friction
-    assert first.robustness.gravity_test_share is None  # not built for MuJoCo
+    assert first.robustness.gravity_test_share is None  # not chosen
     # The trials leave nothing behind: the next evaluation is the same.
     again = evaluator.evaluate(FROM_SIDE)
     assert again.robustness == first.robustness and again.mu_s == first.mu_s

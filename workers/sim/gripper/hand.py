@@ -56,6 +56,9 @@ class FingerJoints:
     shares: list[float]
     active: int = 0  # how many phalanges are closing
     last: list[float] = field(default_factory=list)
+    # Links the finger's linkage moves without a command of its own (an MJCF's passive joints,
+    # mj/mjcf.py): beyond every phalanx, so one touching the object blocks them all.
+    passive: list[int] = field(default_factory=list)
 
 
 class Hand:
@@ -180,7 +183,7 @@ class Hand:
         would swing on at full effort)."""
         if angle >= finger.uppers[k] - LIMIT_MARGIN:
             target = 0.0
-        elif touching.intersection(finger.joints[k:]):
+        elif touching.intersection(finger.joints[k:] + finger.passive):
             target = PUSH_VELOCITY
         elif stop_free:
             target = 0.0

@@ -13,10 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pybullet as p
-from graspscape.shared.specs.gripper import AnyGripperSpec, GripperSpec
+from graspscape.shared.specs.gripper import AnyGripperSpec, GripperSpec, MjcfGripperSpec
 from graspscape.workers.sim.gripper.urdf import write_gripper_urdf
 from graspscape.workers.sim.gripper.urdf_import import (
     Coupling,
+    GripperFileError,
     JointLayout,
     prepare_urdf,
 )
@@ -37,6 +38,7 @@ class HandModel:
     fingers: tuple[JointLayout, ...]
     couplings: tuple[Coupling, ...] = ()
     vendor_names: dict[str, str] | None = None
+    passive: dict[str, tuple[str, ...]] | None = None  # finger -> joints no command moves
 
 
 def _box_layout(spec: GripperSpec) -> tuple[JointLayout, ...]:
@@ -52,6 +54,10 @@ def _box_layout(spec: GripperSpec) -> tuple[JointLayout, ...]:
 
 
 def hand_model(spec: AnyGripperSpec, directory: Path) -> HandModel:
+    if isinstance(spec, MjcfGripperSpec):
+        raise GripperFileError(
+            f"gripper {spec.name!r} is described by an MJCF ({spec.mjcf}), which only the "
+            "MuJoCo engine loads: run it with --engine mujoco")
     if isinstance(spec, GripperSpec):
         return HandModel(write_gripper_urdf(spec, directory), p.URDF_USE_INERTIA_FROM_FILE,
                          _box_layout(spec))

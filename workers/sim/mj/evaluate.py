@@ -5,32 +5,35 @@ loading, saved states (copies of mjData), release (the fixture weld switched off
 the probes' rollouts (mj/probes.py).
 
 MuJoCo steps `physics.mujoco_substeps` times per pybullet step: the step counts a policy or a
-probe window is given (check_every_steps, window_steps) are scaled by it, so each lasts as
-long as in pybullet. Of the robustness tests the torque and friction margins run
-(mj/robustness.py); rendering through MuJoCo is not built: a picture is drawn by pybullet's
+probe window is given (check_every_steps, the haptic policy's steps_per_iteration,
+window_steps) are scaled by it, so each lasts as
+long as in pybullet. The robustness margins and grasp tests run as pybullet's do, through
+mj/robustness.py's trials; rendering through MuJoCo is not built: a picture is drawn by pybullet's
 renderer from the MuJoCo grasp's poses (mj/picture.py).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import mujoco
 import numpy as np
 from graspscape.shared.specs.gripper import AnyGripperSpec
 from graspscape.shared.specs.pose import Pose
-from graspscape.shared.specs.results import Outcome, PhaseTimes, PoseResult
+from graspscape.shared.specs.results import Outcome, PhaseTimes, PoseResult, RobustnessReport
+from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import SimSettings
 from graspscape.workers.sim.evaluate import slip_check
 from graspscape.workers.sim.grasp_record import grasp_fields
-from graspscape.workers.sim.gripper.model import hand_model
 from graspscape.workers.sim.metric import mu_s
 from graspscape.workers.sim.mj.hand import MjHand
+from graspscape.workers.sim.mj.mjcf import load_world
 from graspscape.workers.sim.mj.probes import probe_state
-from graspscape.workers.sim.mj.robustness import capture, run_tests
+from graspscape.workers.sim.mj.robustness import MjGrasp, capture, run_tests
 from graspscape.workers.sim.mj.scene import MjScene
-from graspscape.workers.sim.mj.world import build_world
 from graspscape.workers.sim.objects import PreparedObject
 from graspscape.workers.sim.policies import get_policy
 from graspscape.workers.sim.start_pose import StartPose, start_pose
@@ -46,21 +49,20 @@ class MjEvaluator:
                  settings: SimSettings | None = None, *, work_dir: Path,
                  world_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         self.settings = settings = settings or SimSettings()
-        if settings.policy_name != "baseline":
-            raise ValueError("the MuJoCo engine runs the baseline policy only "
-                             f"(asked for {settings.policy_name!r})")
         self.prepared, self.gripper, self.work_dir = prepared, gripper, work_dir
         self.policy = get_policy(settings.policy_name)
         k = settings.physics.mujoco_substeps
         self.substeps = k
         # The step counts the policy reads, scaled to keep their duration (module docstring);
         # model_copy skips validation, so a scaled count may pass the spec's upper bound.
-        self.run_settings = settings.model_copy(update={"policy": settings.policy.model_copy(
-            update={"check_every_steps": settings.policy.check_every_steps * k})})
+        self.run_settings = settings.model_copy(update={
+            "policy": settings.policy.model_copy(
+                update={"check_every_steps": settings.policy.check_every_steps * k}),
+            "haptic": settings.haptic.model_copy(
+                update={"steps_per_iteration": settings.haptic.steps_per_iteration * k})})
         dt = settings.physics.dt / k
         offset = np.array(world_offset, dtype=float)
-        model = hand_model(gripper, work_dir / "urdf")
-        self.world = build_world(prepared, model, dt, offset)
+        self.world, model = load_world(prepared, gripper, dt, offset, work_dir)
         self.data = mujoco.MjData(self.world.model)
         hand = MjHand(self.world, self.data, gripper, model)
         self.scene = MjScene(self.world, self.data, hand, offset, dt)
@@ -103,8 +105,29 @@ class MjEvaluator:
         return start_pose(None, self.scene, self.prepared.mesh, pose, self.settings.placement)
 
     def evaluate(self, pose: Pose, *, picture: Path | None = None, **_: object) -> PoseResult:
-        """Simulates one pose (as Evaluator.evaluate; no donors; of the robustness tests the
-        settings choose, the margins). With `picture`, a PNG of the synthesized grasp."""
+        """Simulates one pose (as Evaluator.evaluate; no donors; the robustness tests the
+        settings choose). With `picture`, a PNG of the synthesized grasp."""
+        return self._evaluate(pose, picture=picture)[0]
+
+    @contextmanager
+    def synthesized(self, pose: Pose) -> Iterator[tuple[PoseResult, MjGrasp | None]]:
+        """Evaluates `pose` as `evaluate` does and yields its result with the synthesized grasp
+        (None where no grasp formed), as Evaluator.synthesized does."""
+        yield self._evaluate(pose, keep_grasp=True)
+
+    def robustness(self, pose: Pose, settings: RobustnessSettings | None = None,
+                   **_: object) -> tuple[PoseResult, RobustnessReport]:
+        """As Evaluator.robustness: `pose` evaluated and, if it held, the chosen tests (None:
+        every test) run on its synthesized grasp."""
+        settings = settings or RobustnessSettings.every_test()
+        with self.synthesized(pose) as (result, grasp):
+            report = RobustnessReport()
+            if grasp is not None and result.outcome is Outcome.HELD:
+                report = run_tests(self, grasp, settings)
+        return result.model_copy(update={"robustness": report}), report
+
+    def _evaluate(self, pose: Pose, *, picture: Path | None = None, keep_grasp: bool = False,
+                  ) -> tuple[PoseResult, MjGrasp | None]:
         started = time.perf_counter()
         phases = PhaseTimes()
         self._reset()
@@ -112,27 +135,29 @@ class MjEvaluator:
         phases.reset_s = time.perf_counter() - started
         result: dict = dict(pose=pose, pose_key=pose.key(), phases=phases)
         if start is None:
-            return self._finish(started, Outcome.INFEASIBLE, result)
+            return self._finish(started, Outcome.INFEASIBLE, result), None
         position, rotation, target, gap = start
         result["effective_r"] = gap
         outcome = self.policy.synthesize(self.scene, position, rotation, target,
                                          self.run_settings, phases)
         if outcome is not None:
-            return self._finish(started, outcome, result)
+            return self._finish(started, outcome, result), None
         result.update(grasp_fields(self.scene, self.length, self.prepared.mass_kg))
         if picture is not None:
             from graspscape.workers.sim.mj.picture import draw_scene
 
             draw_scene(self, picture)
-        grasp = capture(self) if self.settings.robustness.tests else None
+        tests = self.settings.robustness.tests
+        grasp = capture(self) if tests or keep_grasp else None
         held, qualities, effort = self._run_trajectory(phases)
         result["effort_max_nm"] = effort
         if held:
             result["mu_s"] = mu_s(qualities)
             result["viable"] = True
-            if grasp is not None:
+            if tests:
                 result["robustness"] = run_tests(self, grasp, self.settings.robustness)
-        return self._finish(started, Outcome.HELD if held else Outcome.DROPPED, result)
+        return (self._finish(started, Outcome.HELD if held else Outcome.DROPPED, result),
+                grasp)
 
     def _release(self) -> tuple[np.ndarray, np.ndarray, int]:
         """Release and settle; returns the start pose of the trajectory and the steps run."""

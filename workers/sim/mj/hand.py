@@ -55,11 +55,14 @@ class MjHand(Hand):
             spread_joint=by_name[f.spread_joint] if f.spread_joint else None,
             spread_sign=f.spread_sign, joints=[by_name[n] for n in f.joints],
             open_values=list(f.open_values), uppers=list(f.uppers), shares=list(f.shares),
+            passive=[by_name[n] for n in (model.passive or {}).get(f.finger, ())],
         ) for f in model.fingers]
         self.finger_joints = [j for f in self.fingers for j in f.joints]
         self.couplings = [(by_name[c.follower], by_name[c.driver], c.ratio, c.offset)
                           for c in model.couplings]
-        self.mass = float(sum(m.body_mass[b] for b in world.link_names))
+        self.mass = float(m.body_subtreemass[world.palm_body])  # rigid parts included
+        # (s, g) of a joint driven through a shared actuator (world.transmission).
+        self._trn = {by_name[n]: sg for n, sg in world.transmission.items()}
         self.base_inertial_offset = np.array(m.body_ipos[world.palm_body])
         self.effort = spec.closing_effort
         self.hold_factor = 3.0
@@ -99,17 +102,22 @@ class MjHand(Hand):
         if act is None:
             return
         m = self.world.model
+        # A shared actuator (an MJCF's tendon) works in its own units: the fingers' common
+        # target times s, the joint's force over g (world.transmission); the gains below then
+        # reach the cap at the same joint error as a joint's own actuator does.
+        s, g = self._trn.get(joint, (1.0, 1.0))
+        force, target = force / g, target * s
         m.actuator_forcerange[act] = (-force, force)
         m.actuator_biasprm[act, :3] = 0.0
         if mode == VELOCITY:
-            kv = force / VELOCITY_BAND
+            kv = force / (VELOCITY_BAND * s)
             m.actuator_gainprm[act, 0] = kv
             m.actuator_biasprm[act, 2] = -kv
         else:
-            kp = force / POSITION_BAND
+            kp = force / (POSITION_BAND * s)
             m.actuator_gainprm[act, 0] = kp
             m.actuator_biasprm[act, 1] = -kp
-            m.actuator_biasprm[act, 2] = -KD_PER_FORCE * force
+            m.actuator_biasprm[act, 2] = -KD_PER_FORCE * force / s
         self.data.ctrl[act] = target
 
     def hold_positions(self, joints: list[int], targets: list[float], force: float) -> None:
@@ -133,10 +141,12 @@ class MjHand(Hand):
         return [float(self.data.qpos[self._qpos[j]]) for j in finger.joints]
 
     def joint_angles(self) -> dict[str, float]:
-        names = sorted(self.joint_by_name.items(), key=lambda kv: kv[1])
-        return {name.removesuffix("_joint"): float(self.data.qpos[self._qpos[j]])
-                for name, j in names}
+        """By the Graspscape link name each joint moves (a URDF's joint name less `_joint`;
+        an MJCF's `<finger>_<k>`, mj/mjcf.py)."""
+        return {self.link_names[j]: float(self.data.qpos[self._qpos[j]])
+                for j in sorted(self.joint_by_name.values())}
 
     def max_finger_torque(self) -> float:
-        acts = [self._act[j] for j in self.finger_joints if j in self._act]
-        return float(np.max(np.abs(self.data.actuator_force[acts]))) if acts else 0.0
+        forces = [abs(self.data.actuator_force[self._act[j]]) * self._trn.get(j, (1.0, 1.0))[1]
+                  for j in self.finger_joints if j in self._act]
+        return float(max(forces)) if forces else 0.0

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pybullet as p
+from graspscape.shared.specs.gripper import MjcfGripperSpec
 from graspscape.workers.sim.geometry import quat_from_matrix
 from graspscape.workers.sim.gripper.hand import Hand
 from graspscape.workers.sim.objects import forget_client, spawn_object
@@ -15,6 +16,9 @@ from graspscape.workers.sim.render import render_grasp
 
 def draw_scene(evaluator, path: Path) -> Path:
     """Writes the present MuJoCo scene of `evaluator` (an MjEvaluator) to `path` (PNG)."""
+    if isinstance(evaluator.gripper, MjcfGripperSpec):
+        raise ValueError(f"no picture of {evaluator.gripper.name}: pictures are drawn by "
+                         "pybullet's renderer, which loads TOML and URDF grippers, not MJCF")
     cid = p.connect(p.DIRECT)
     try:
         scene, mj_hand = evaluator.scene, evaluator.scene.hand

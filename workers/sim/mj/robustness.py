@@ -1,7 +1,16 @@
-"""The margins of workers/sim/robustness.py in MuJoCo: the torque margin (the least closing
-effort at which the synthesized grasp still holds through the task) and the friction margin
-(the least object friction), by the same bisection (`lowest_holding`). The hold-still tests
-(gravity, force, tug, shake) are not built for MuJoCo: their fields stay None."""
+"""The robustness margins and grasp tests of workers/sim/robustness.py in MuJoCo: the same
+definitions and the same code (grasp_tests.py) through `MjTrials`, MuJoCo's way to put the
+synthesized grasp back, let it go and load the object.
+
+- The synthesized grasp is a copy of the whole mjData (positions, velocities, warm start,
+  controls, the fixture's activation); restoring copies it back, the motor commands with it
+  (reissued: the model holds the gains), no gravity, the object's own friction.
+- Release: the fixture weld switched off, gravity set along the test's direction. The hand's
+  links keep their gravity compensation (the arm carries the hand, as through the trajectory),
+  so a gravity test loads the object only, where pybullet's gravity also pulls on the fingers.
+- A load on the object: `xfrc_applied` at its centre of mass (the body's origin), cleared
+  before the next step is loaded and on every restore.
+"""
 
 from __future__ import annotations
 
@@ -11,8 +20,8 @@ import mujoco
 import numpy as np
 from graspscape.shared.specs.results import PhaseTimes, RobustnessReport
 from graspscape.shared.specs.robustness import RobustnessSettings
+from graspscape.workers.sim import grasp_tests
 from graspscape.workers.sim.mj.world import HAND_LINK_FRICTION
-from graspscape.workers.sim.robustness import lowest_holding, torque_ratio
 
 
 @dataclass(frozen=True)
@@ -24,6 +33,8 @@ class MjGrasp:
     effort: float
     drive: tuple[np.ndarray, np.ndarray, float]  # target position, quaternion (w, x, y, z), cap
     friction: float  # the object's own coefficient (pybullet's lateral friction)
+    frame_rotation: np.ndarray  # the gripper frame at synthesis, world
+    mass_kg: float
 
 
 def capture(evaluator) -> MjGrasp:
@@ -32,49 +43,73 @@ def capture(evaluator) -> MjGrasp:
     mujoco.mj_copyData(state, evaluator.world.model, evaluator.data)
     return MjGrasp(state, dict(hand.commands), float(hand.effort),
                    (scene._target_pos.copy(), scene._target_quat.copy(), scene._cap),
-                   evaluator.prepared.friction)
+                   evaluator.prepared.friction, hand.frame_pose()[1],
+                   float(evaluator.prepared.mass_kg))
 
 
 def _set_friction(evaluator, mu: float) -> None:
     """Every hand-object pair's coefficient for an object of friction `mu` (world.py)."""
-    evaluator.world.model.geom_friction[:, 0] = mu * HAND_LINK_FRICTION
+    model = evaluator.world.model
+    colliding = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
+    model.geom_friction[colliding, 0] = mu * HAND_LINK_FRICTION
+
+
+def restore(evaluator, grasp: MjGrasp, *, effort: float | None = None) -> None:
+    """The grasp as synthesis left it, the fingers' forces scaled to `effort` if given."""
+    scene, hand = evaluator.scene, evaluator.scene.hand
+    mujoco.mj_copyData(evaluator.data, evaluator.world.model, grasp.state)
+    evaluator.data.xfrc_applied[:] = 0.0
+    hand.commands = dict(grasp.commands)
+    hand.effort = grasp.effort
+    hand.reissue(effort)
+    scene.set_gravity(0.0)
+    scene._set_target(*grasp.drive)
+    _set_friction(evaluator, grasp.friction)
 
 
 def holds(evaluator, grasp: MjGrasp, *, effort: float | None = None,
           friction: float | None = None) -> bool:
     """Whether the grasp, restored with the closing effort `effort` and the object friction
     `friction`, holds through release and the reference task (no probes)."""
-    scene, hand = evaluator.scene, evaluator.scene.hand
-    mujoco.mj_copyData(evaluator.data, evaluator.world.model, grasp.state)
-    hand.commands = dict(grasp.commands)
-    hand.effort = grasp.effort
-    hand.reissue(effort)
-    scene.set_gravity(0.0)
-    scene._set_target(*grasp.drive)
+    restore(evaluator, grasp, effort=effort)
     try:
         if friction is not None:
             _set_friction(evaluator, friction)
         held, _, _ = evaluator._run_trajectory(PhaseTimes(), probes=False)
     finally:
         _set_friction(evaluator, grasp.friction)
-        hand.reissue()
+        evaluator.scene.hand.reissue()
     return held
 
 
-def run_tests(evaluator, grasp: MjGrasp, settings: RobustnessSettings) -> RobustnessReport:
-    out: dict[str, float | None] = {}
-    if not (settings.runs("torque_margin") or settings.runs("friction_margin")):
-        return RobustnessReport()
-    nominal = holds(evaluator, grasp)
-    if settings.runs("torque_margin"):
-        tau = lowest_holding(lambda t: holds(evaluator, grasp, effort=t),
-                             settings.torque_lo_fraction * grasp.effort, grasp.effort,
-                             settings.margin_trials, hi_holds=nominal)
-        out["torque_margin_nm"] = tau
-        out["torque_margin_ratio"] = torque_ratio(tau, grasp.effort)
-    if settings.runs("friction_margin"):
-        hi = grasp.friction
-        out["friction_margin"] = lowest_holding(
-            lambda mu: holds(evaluator, grasp, friction=mu), min(settings.friction_lo, hi), hi,
-            settings.margin_trials, hi_holds=nominal)
-    return RobustnessReport(**out)
+class MjTrials:
+    """grasp_tests.GraspTrials on MuJoCo (module docstring)."""
+
+    def __init__(self, evaluator, grasp: MjGrasp) -> None:
+        self.evaluator, self.grasp, self.scene = evaluator, grasp, evaluator.scene
+        self.effort, self.friction, self.mass_kg = grasp.effort, grasp.friction, grasp.mass_kg
+        self.frame_rotation = grasp.frame_rotation
+
+    def restore(self) -> None:
+        restore(self.evaluator, self.grasp)
+
+    def release(self, gravity: np.ndarray) -> None:
+        self.scene.hold_object(False)
+        self.evaluator.world.model.opt.gravity[:] = gravity
+
+    def push(self, force: np.ndarray) -> None:
+        self.evaluator.data.xfrc_applied[self.evaluator.world.object_body, :3] = force
+
+    def holds(self, *, effort: float | None = None, friction: float | None = None) -> bool:
+        return holds(self.evaluator, self.grasp, effort=effort, friction=friction)
+
+
+def run_tests(evaluator, grasp: MjGrasp, settings: RobustnessSettings,
+              times: dict[str, float] | None = None) -> RobustnessReport:
+    """The tests `settings` chooses (grasp_tests.run_tests); the evaluator's own state, loads
+    and friction are put back afterwards."""
+    try:
+        return grasp_tests.run_tests(MjTrials(evaluator, grasp), settings, times)
+    finally:
+        restore(evaluator, grasp)
+        evaluator.scene.hand.reissue()

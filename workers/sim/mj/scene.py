@@ -12,7 +12,7 @@ The hand's own weight is compensated (`gravcomp`), as a stiff pybullet drive car
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import NamedTuple
 
@@ -53,9 +53,16 @@ class MjScene:
         self._target_pos, self._target_quat = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
         self._cap = DRIVE_MAX_FORCE_N
         self._gains = np.eye(6)
+        self._coupling = np.zeros((3, 3))
         self._err = np.zeros(6)
         self._w2, self._2w = DRIVE_BANDWIDTH_RAD_S**2, 2.0 * DRIVE_BANDWIDTH_RAD_S
         self._link = world.geom_link
+        colliding = (self.model.geom_contype != 0) | (self.model.geom_conaffinity != 0)
+        self._object_geoms = np.flatnonzero(colliding & (world.geom_link == -2)
+                                            & (self.model.geom_bodyid == world.object_body))
+        self._link_geoms = {link: np.flatnonzero(colliding & (world.geom_link == link))
+                            for link in set(world.link_index.values())}
+        self._joint_of = {hand.joint_by_name[name]: j for name, j in world.joint_ids.items()}
 
     def calibrate_drive(self) -> None:
         """The palm block of the mass matrix at the present (open) configuration."""
@@ -65,6 +72,12 @@ class MjScene:
         mujoco.mj_fullM(m, d, full)
         s = self.world.palm_dofs
         self._gains = full[s, s].copy()
+        # The free joint's linear coordinates are in the world's axes, its angular ones in the
+        # palm's: the block coupling them turns with the palm (−m·R·[c]×, c the centre of mass
+        # in the palm's frame). Kept here unturned, turned by the palm's rotation each step;
+        # left fixed, it pushed a hand whose centre of mass lies 5 cm behind the palm (the
+        # 2F-85) into a growing spin once it was turned 90° from where this ran.
+        self._coupling = d.xmat[self.world.palm_body].reshape(3, 3).T @ self._gains[:3, 3:]
 
     # --- the drive ---------------------------------------------------------------------
     def drive_to(self, position: np.ndarray, rotation: np.ndarray,
@@ -89,7 +102,11 @@ class MjScene:
         # The turn from the palm's orientation to the target's, in the palm's axes (the free
         # joint's angular dofs are in the body's axes).
         mujoco.mju_subQuat(err[3:], self._target_quat, d.xquat[b])
-        force = self._gains @ (self._w2 * err - self._2w * d.qvel[self.world.palm_dofs])
+        accel = self._w2 * err - self._2w * d.qvel[self.world.palm_dofs]
+        turned = d.xmat[b].reshape(3, 3) @ self._coupling  # this step's −m·R·[c]×
+        gains = self._gains
+        force = np.concatenate([gains[:3, :3] @ accel[:3] + turned @ accel[3:],
+                                turned.T @ accel[:3] + gains[3:, 3:] @ accel[3:]])
         lin, ang = float(np.dot(force[:3], force[:3])), float(np.dot(force[3:], force[3:]))
         cap2 = self._cap * self._cap
         if lin > cap2:
@@ -185,3 +202,64 @@ class MjScene:
         finally:
             model.geom_friction[:, 0] = mu
             model.body_mass[b], model.body_inertia[b] = m, inertia
+
+    # --- probes: the haptic policy's proximity sensors and finite differences -------------
+    def link_distances(self, links: list[int], max_distance: float) -> np.ndarray:
+        """Each link's distance to the object (the least over their geoms' pairs,
+        mj_geomDistance on the positions now), `max_distance` beyond it."""
+        m, d = self.model, self.data
+        mujoco.mj_kinematics(m, d)
+        out = np.full(len(links), float(max_distance))
+        for i, link in enumerate(links):
+            for g in self._link_geoms.get(link, ()):
+                for o in self._object_geoms:
+                    out[i] = min(out[i], mujoco.mj_geomDistance(m, d, int(g), int(o),
+                                                                max_distance, None))
+        return out
+
+    def joint_limits(self, joints: list[int]) -> np.ndarray:
+        return np.array([self.model.jnt_range[self._joint_of[j]] for j in joints])
+
+    def joint_positions(self, joints: list[int]) -> np.ndarray:
+        return np.array([self.data.qpos[self.model.jnt_qposadr[self._joint_of[j]]]
+                         for j in joints])
+
+    def parent_link(self, link: int) -> int:
+        """The link `link` hangs on (−1: the palm), past any rigid bodies between."""
+        body = int(self.model.jnt_bodyid[self._joint_of[link]])
+        index = self.world.link_index
+        body = int(self.model.body_parentid[body])
+        while body not in index and body != 0:
+            body = int(self.model.body_parentid[body])
+        return index.get(body, -1)
+
+    @contextmanager
+    def _probing(self) -> Iterator[Callable[[], None]]:
+        """Yields `put_back`, which copies the whole mjData of entry back (its derived fields
+        too: after mj_step they lag the positions by a step, and the drive reads them);
+        called on leaving too."""
+        saved = mujoco.MjData(self.model)
+        mujoco.mj_copyData(saved, self.model, self.data)
+
+        def put_back() -> None:
+            mujoco.mj_copyData(self.data, self.model, saved)
+
+        try:
+            yield put_back
+        finally:
+            put_back()
+
+    def probing_joints(self):
+        return self._probing()
+
+    @contextmanager
+    def probing_base(self) -> Iterator[None]:
+        with self._probing():
+            yield
+
+    def teleport_joint(self, joint: int, q: float) -> None:
+        self.hand.set_joint(joint, q)
+
+    def teleport_frame(self, position: np.ndarray, rotation: np.ndarray) -> None:
+        x, y, z, w = quat_from_matrix(rotation)
+        self.data.qpos[self.world.palm_qpos] = [*position, w, x, y, z]

@@ -20,7 +20,7 @@ What differs from pybullet, and how the model makes the two comparable (docs/des
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
@@ -54,9 +54,13 @@ class World:
     link_names: dict[int, str]  # body id -> link name ("palm" for the palm)
     link_index: dict[int, int]  # body id -> the pybullet-style link index (-1: palm)
     geom_link: np.ndarray  # geom id -> pybullet-style link index (or -2: not the hand)
+    # finger joint name -> (s, g) of the actuator that drives it, where that actuator is not the
+    # joint's own (an MJCF's tendon): its length moves s per unit of the fingers' common
+    # closing, and a unit of its force is g on this joint (mj/mjcf.py).
+    transmission: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
-def _add_object(spec: mujoco.MjSpec, prepared: PreparedObject, offset: np.ndarray,
+def add_object(spec: mujoco.MjSpec, prepared: PreparedObject, offset: np.ndarray,
                 friction: float, solref: list[float]) -> None:
     body = spec.worldbody.add_body(name=OBJECT, pos=offset.tolist())
     body.add_freejoint(name="object_free")
@@ -78,30 +82,48 @@ def _add_object(spec: mujoco.MjSpec, prepared: PreparedObject, offset: np.ndarra
                       data=[0.0] * 10 + [1.0, 0.0], solref=solref)
 
 
-def build_world(prepared: PreparedObject, hand: HandModel, dt: float, offset: np.ndarray,
-                ) -> World:
-    spec = mujoco.MjSpec.from_file(str(hand.urdf))
-    spec.compiler.discardvisual = True
+def set_options(spec: mujoco.MjSpec, dt: float) -> None:
     spec.option.timestep = dt
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.gravity = [0.0, 0.0, 0.0]
     spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
-    friction = prepared.friction * HAND_LINK_FRICTION
-    # A time constant in seconds, not in steps: at the default step (2.08 ms) it is MuJoCo's
-    # floor 2·dt; a finer step keeps the same contact model instead of a stiffer one, so a
-    # finer-step reference measures the integration alone.
-    solref = [max(SOLREF_TIMECONST_S, 2.0 * dt), 1.0]
-    palm = spec.body(PALM)
-    palm.add_freejoint(name="palm_free")
+    spec.option.impratio = 1.0
+
+
+def contact_solref(dt: float) -> list[float]:
+    """A time constant in seconds, not in steps: at the default step (2.08 ms) it is MuJoCo's
+    floor 2·dt; a finer step keeps the same contact model instead of a stiffer one, so a
+    finer-step reference measures the integration alone."""
+    return [max(SOLREF_TIMECONST_S, 2.0 * dt), 1.0]
+
+
+def set_up_hand(spec: mujoco.MjSpec, friction: float, solref: list[float], *,
+                keep_visual: bool = False) -> None:
+    """The free joint on the palm, the hand's weight carried, and every hand geom colliding
+    with the object only, with pybullet's pair friction (module docstring). `keep_visual`:
+    geoms that collide with nothing (an MJCF's visual ones, which may carry mass) stay so."""
+    spec.body(PALM).add_freejoint(name="palm_free")
     for body in spec.bodies:
         if body.name == "world":
             continue
         body.gravcomp = 1.0  # the arm carries the hand's weight (scene.py, "The arm's drive")
         for geom in body.geoms:
+            if keep_visual and geom.contype == 0 and geom.conaffinity == 0:
+                continue
             geom.contype, geom.conaffinity = HAND_GROUP, OBJECT_GROUP
             geom.friction = [friction, 0.0, 0.0]
             geom.solref = solref
             geom.condim = 3
+
+
+def build_world(prepared: PreparedObject, hand: HandModel, dt: float, offset: np.ndarray,
+                ) -> World:
+    spec = mujoco.MjSpec.from_file(str(hand.urdf))
+    spec.compiler.discardvisual = True
+    set_options(spec, dt)
+    friction = prepared.friction * HAND_LINK_FRICTION
+    solref = contact_solref(dt)
+    set_up_hand(spec, friction, solref)
     finger_joints = [j.name for j in spec.joints if j.name != "palm_free"]
     for j in spec.joints:
         if j.name != "palm_free":
@@ -119,30 +141,41 @@ def build_world(prepared: PreparedObject, hand: HandModel, dt: float, offset: np
     for c in hand.couplings:
         spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=c.follower, name2=c.driver,
                           data=[c.offset, c.ratio, 0, 0, 0] + [0.0] * 7, solref=solref)
-    _add_object(spec, prepared, offset, friction, solref)
+    add_object(spec, prepared, offset, friction, solref)
     model = spec.compile()
-    return _index(model)
+    return index_world(model)
 
 
-def _index(model: mujoco.MjModel) -> World:
+def index_world(model: mujoco.MjModel, names: dict[str, str] | None = None,
+                actuator_of: dict[str, int] | None = None,
+                transmission: dict[str, tuple[float, float]] | None = None,
+                prefix: str = "") -> World:
+    """The World of a compiled model. `names`: joint name -> the Graspscape name of the link
+    it moves (an MJCF's; a rewritten URDF's bodies already have theirs); `actuator_of`: finger
+    joint -> actuator, where the actuator is not on the joint itself; `prefix`: what an
+    attached MJCF's joint names begin with (dropped: joints go by the vendor's names)."""
     palm = model.body(PALM).id
     obj = model.body(OBJECT).id
     palm_joint = model.joint("palm_free")
     obj_joint = model.joint("object_free")
-    joint_ids = {model.joint(j).name: j for j in range(model.njnt)
+    joint_ids = {model.joint(j).name.removeprefix(prefix): j for j in range(model.njnt)
                  if model.joint(j).name not in ("palm_free", "object_free")}
-    actuator_of = {model.joint(int(model.actuator_trnid[a, 0])).name: a
-                   for a in range(model.nu)}
+    if actuator_of is None:
+        actuator_of = {model.joint(int(model.actuator_trnid[a, 0])).name: a
+                       for a in range(model.nu)}
     link_names = {palm: "palm"}
     link_index = {palm: -1}
     # pybullet's link index is its joint index in URDF order; the body of joint k is link k.
     for k, j in enumerate(sorted(joint_ids.values())):
         body = int(model.jnt_bodyid[j])
-        link_names[body] = model.body(body).name
+        name = model.joint(j).name.removeprefix(prefix)
+        link_names[body] = (names or {}).get(name, model.body(body).name)
         link_index[body] = k
     geom_link = np.full(model.ngeom, -2, dtype=int)
     for g in range(model.ngeom):
         body = int(model.geom_bodyid[g])
+        while body not in link_index and body != 0:  # a rigid part: its moving ancestor's link
+            body = int(model.body_parentid[body])
         if body in link_index:
             geom_link[g] = link_index[body]
     qa, da = int(palm_joint.qposadr[0]), int(palm_joint.dofadr[0])
@@ -152,7 +185,8 @@ def _index(model: mujoco.MjModel) -> World:
                  palm_qpos=slice(qa, qa + 7), fixture=model.equality("fixture").id,
                  grip_weld=model.equality("grip_weld").id,
                  joint_ids=joint_ids, actuator_of=actuator_of, link_names=link_names,
-                 link_index=link_index, geom_link=geom_link)
+                 link_index=link_index, geom_link=geom_link,
+                 transmission=dict(transmission or {}))
 
 
 def urdf_dir(work_dir: Path) -> Path:

@@ -2,8 +2,9 @@
 
 Proximity sensor model: every gripper link (the palm, each phalanx and each link of a joint
 coupled to another, a parallel jaw's second finger) reads its distance to the nearest object
-surface, pybullet's closest-point query per link, saturated at the sensing range and
-optionally perturbed by seeded Gaussian noise.
+surface (the engine's closest-point query per link: `scene.link_distances`), saturated at the
+sensing range and optionally perturbed by seeded Gaussian noise. The policy acts through the
+scene's methods only, so it runs in either engine.
 
 Step 1, digit alignment: the base holds still while the finger joints θ move along the damped
 pseudo-inverse of Ĵ_s = ∂d̂/∂θ, d̂_i = d_i − d_b (link distance minus the palm's), asking for
@@ -24,10 +25,10 @@ also when every link reads within d_c without touching yet (closing makes the co
 Both iterations are closed loops on the live simulation: each update is sent to the base drive
 (force-capped like G_c's approach) and the joint position motors, the physics runs a few steps,
 and the next Jacobian is estimated at the pose actually reached. Jacobians are finite
-differences of the sensor model: a probe teleports one joint (or the base) with resetJointState
-(resetBasePositionAndOrientation), reads the distances and puts the exact state back (joint
-positions and velocities; for the base, a saved state), so probing never changes what the
-simulation does next (a test checks it bit for bit).
+differences of the sensor model: a probe teleports one joint (or the base: the scene's
+`teleport_joint`, `teleport_frame`), reads the distances and puts the exact state back (the
+scene's `probing_joints`, `probing_base`), so probing never changes what the simulation does
+next (a test checks it bit for bit).
 Probe readings are noise-free: the Jacobian stands for the local surface model a real
 controller would fit; the noise enters the readings that set the targets.
 """
@@ -39,17 +40,9 @@ import zlib
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet as p
 from graspscape.shared.specs.haptic import HapticPolicySettings
 from graspscape.shared.specs.results import Outcome, PhaseTimes
 from graspscape.shared.specs.sim import SimSettings
-from graspscape.workers.sim.bullet import (
-    get_closest_points,
-    get_joint_info,
-    get_joint_positions,
-    get_joint_state,
-    saved_state,
-)
 from graspscape.workers.sim.policies.closing import close_fingers
 from graspscape.workers.sim.policies.registry import register_policy
 from scipy.spatial.transform import Rotation
@@ -61,7 +54,6 @@ class ProximitySensors:
     def __init__(self, scene, settings: HapticPolicySettings, seed: int) -> None:
         self.scene = scene
         self.hand = scene.hand
-        self.client = scene.client
         self.range = settings.sensing_range_m
         self.noise = settings.noise_std_m
         self.rng = np.random.default_rng(seed)
@@ -72,36 +64,14 @@ class ProximitySensors:
         self.links = [-1] + [j for f in self.hand.fingers for j in f.joints] + followers
         self.index = {link: i for i, link in enumerate(self.links)}
 
-    def _distance(self, link: int) -> float:
-        points = get_closest_points(self.client, self.hand.body, self.scene.object_body,
-                                    self.range, link_a=link)
-        return min((pt.contact_distance for pt in points), default=self.range)
-
     def exact(self, links: list[int] | None = None) -> np.ndarray:
-        return np.array([self._distance(link) for link in (links or self.links)])
+        return self.scene.link_distances(links or self.links, self.range)
 
     def read(self) -> np.ndarray:
         distances = self.exact()
         if self.noise > 0.0:
             distances = distances + self.rng.normal(0.0, self.noise, distances.shape)
         return np.minimum(distances, self.range)
-
-
-class JointSnapshot:
-    """Exact positions and velocities of the hand's joints, to put back after a probe
-    (resetJointState restores them bit for bit; a test checks the rollout is unchanged)."""
-
-    def __init__(self, hand) -> None:
-        self.hand = hand
-        self.joints = {j: get_joint_state(hand.client, hand.body, j) for j in hand.movable}
-
-    def position(self, joint: int) -> float:
-        return self.joints[joint].joint_position
-
-    def restore(self, joint: int) -> None:
-        state = self.joints[joint]
-        p.resetJointState(self.hand.body, joint, state.joint_position, state.joint_velocity,
-                          physicsClientId=self.hand.client)
 
 
 def _followers(hand, joint: int, q: float) -> list[tuple[int, float]]:
@@ -117,12 +87,11 @@ def _followers(hand, joint: int, q: float) -> list[tuple[int, float]]:
 
 def _moved_links(sensors: ProximitySensors, joints: set[int]) -> list[int]:
     """Sensing links that move with any of `joints`: those with one of them up their chain."""
-    hand = sensors.hand
     moved = []
     for link in sensors.links[1:]:
         chain = link
         while chain >= 0 and chain not in joints:
-            chain = get_joint_info(hand.client, hand.body, chain).parent_index
+            chain = sensors.scene.parent_link(chain)
         if chain >= 0:
             moved.append(link)
     return moved
@@ -131,36 +100,34 @@ def _moved_links(sensors: ProximitySensors, joints: set[int]) -> list[int]:
 def joint_jacobian(sensors: ProximitySensors, joints: list[int], step: float) -> np.ndarray:
     """∂d/∂θ (rows: sensing links, columns: joints) by forward differences; a probe moves the
     joints coupled to the probed one with it, as the gear would."""
-    hand = sensors.hand
-    state = JointSnapshot(hand)
-    base = sensors.exact()
+    scene, hand = sensors.scene, sensors.hand
     jac = np.zeros((len(sensors.links), len(joints)))
-    for col, joint in enumerate(joints):
-        q = state.position(joint)
-        upper = get_joint_info(hand.client, hand.body, joint).joint_upper_limit
-        # Step inward unless that leaves the joint range (then outward): the model stays valid.
-        h = step if q + step <= upper else -step
-        probed = [(joint, q + h), *_followers(hand, joint, q + h)]
-        for moved_joint, value in probed:
-            p.resetJointState(hand.body, moved_joint, value, 0.0, physicsClientId=hand.client)
-        links = _moved_links(sensors, {j for j, _ in probed})
-        probe = sensors.exact(links)
-        for link, value in zip(links, probe, strict=True):
-            row = sensors.index[link]
-            jac[row, col] = (value - base[row]) / h
-        for moved_joint, _ in probed:
-            state.restore(moved_joint)
+    uppers = scene.joint_limits(joints)[:, 1]
+    angles = scene.joint_positions(joints)
+    with scene.probing_joints() as put_back:
+        base = sensors.exact()
+        for col, joint in enumerate(joints):
+            q = angles[col]
+            # Step inward unless that leaves the joint range (then outward): the model stays
+            # valid.
+            h = step if q + step <= uppers[col] else -step
+            probed = [(joint, q + h), *_followers(hand, joint, q + h)]
+            for moved_joint, value in probed:
+                scene.teleport_joint(moved_joint, value)
+            links = _moved_links(sensors, {j for j, _ in probed})
+            probe = sensors.exact(links)
+            for link, value in zip(links, probe, strict=True):
+                row = sensors.index[link]
+                jac[row, col] = (value - base[row]) / h
+            put_back()
     return jac
 
 
 def base_jacobian(sensors: ProximitySensors, step_m: float, step_rad: float) -> np.ndarray:
     """∂d/∂η_r: world translations of the gripper frame, then rotations about world axes
     through the palm centre (rows: sensing links)."""
-    hand = sensors.hand
-    # Putting the base back with resetBasePositionAndOrientation is off by ~1e-13 (pybullet
-    # converts between the link and inertial frames), enough to change a later contact-rich
-    # rollout: the whole state is saved and restored instead (~1 ms).
-    with saved_state(hand.client):
+    scene, hand = sensors.scene, sensors.hand
+    with scene.probing_base():
         base = sensors.exact()
         frame_pos, frame_rot = hand.frame_pose()
         jac = np.zeros((len(sensors.links), 6))
@@ -172,8 +139,7 @@ def base_jacobian(sensors: ProximitySensors, step_m: float, step_rad: float) -> 
             else:
                 turn = Rotation.from_rotvec(axis * step_rad).as_matrix()
                 pos, rot, h = frame_pos, turn @ frame_rot, step_rad
-            com, orn = hand.com_pose_for(pos, rot)
-            p.resetBasePositionAndOrientation(hand.body, com, orn, physicsClientId=hand.client)
+            scene.teleport_frame(pos, rot)
             jac[:, col] = (sensors.exact() - base) / h
     return jac
 
@@ -202,14 +168,12 @@ class HapticPolicy:
     def synthesize(self, scene, position: np.ndarray, rotation: np.ndarray, target: np.ndarray,
                    sim: SimSettings, phases: PhaseTimes) -> Outcome | None:
         cfg = sim.haptic
-        hand, cid = scene.hand, scene.client
+        hand = scene.hand
         # Same inputs, same noise: the seed comes from the settings and the start pose.
         key = np.round(np.concatenate([position, rotation.ravel()]), 9).tobytes()
         sensors = ProximitySensors(scene, cfg, zlib.crc32(key) ^ cfg.noise_seed)
         joints = list(hand.finger_joints)
-        infos = [get_joint_info(cid, hand.body, j) for j in joints]
-        limits = np.array([(info.joint_lower_limit, info.joint_upper_limit) for info in infos])
-        run = _Run(scene, sensors, joints, limits, phases)
+        run = _Run(scene, sensors, joints, scene.joint_limits(joints), phases)
         t0 = time.perf_counter()
         # --- step 1: digit alignment (base still, joints only) --------------------------
         scene.drive_to(position, rotation)
@@ -239,8 +203,7 @@ class _Run:
     phases: PhaseTimes
 
     def angles(self) -> np.ndarray:
-        hand = self.scene.hand  # type: ignore[attr-defined]
-        return np.array(get_joint_positions(hand.client, hand.body, self.joints))
+        return self.scene.joint_positions(self.joints)  # type: ignore[attr-defined]
 
     def command_joints(self, values: np.ndarray, force: float) -> None:
         self.scene.hand.hold_positions(self.joints, values.tolist(), force)  # type: ignore[attr-defined]
