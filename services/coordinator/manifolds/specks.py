@@ -25,12 +25,13 @@ import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping
 
-from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.grouping import (
     MIN_POSES,
     MIN_SHARE,
     SPECK_TOLERANCE_RAD,
 )
+from graspscape.services.coordinator.manifolds.pairs import within
 from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 
@@ -94,16 +95,24 @@ class SpeckVotes:
         """Components made, joined (both) or split (both) by the grouping."""
         self._comps.update(cids)
 
-    def sync(self, new: Iterable[Point], moved: Iterable[Point]) -> None:
+    def sync(self, new: Iterable[Point], moved: Iterable[Point],
+             diffs: Mapping[tuple[Point, Point], float] | None = None) -> None:
         """Bring W up to date: the points that changed component first, then the new
         viable points' links (to every viable point counted so far, the batch's earlier
-        ones included)."""
+        ones included). `diffs`: the joint differences of (new point, neighbour) pairs the
+        grouping has worked out for the batch (manifolds/pairs.py); pairs not there are
+        asked of `same_behaviour`."""
         rec, comp_of = self._rec, self._comp_of
         for x in moved:
             old = rec.get(x)
             if old is not None and old != comp_of[x]:
                 self._rehome(x, old, comp_of[x])
-        near = self._near
+        samples, known = self.samples, diffs or {}
+        nan = math.nan
+
+        def near(p: Point, q: Point, d: float) -> bool:
+            return within(d, samples[p], samples[q], SPECK_TOLERANCE_RAD)
+
         # A point's neighbours are a pure function of it; within one batch the same points
         # are asked for again and again (x's neighbours q, then q's to count the links back),
         # so they are kept for the batch.
@@ -124,20 +133,18 @@ class SpeckVotes:
                 cq = rec.get(q)
                 if cq is None:
                     continue
-                if near(x, q):
+                d = known.get((x, q), nan)
+                if near(x, q, d):
                     out_x[q] = m
                     self._in[q][x] = m
                     if cq != cx:
                         self._add(cx, cq, m)
                 back = neighbours(q).count(x)  # q → x: as often as q's list names x
-                if back and near(q, x):
+                if back and near(q, x, d):
                     self._out[q][x] = back
                     in_x[q] = back
                     if cq != cx:
                         self._add(cq, cx, back)
-
-    def _near(self, p: Point, q: Point) -> bool:
-        return same_behaviour(self.samples[p], self.samples[q], SPECK_TOLERANCE_RAD)
 
     def _add(self, c: int, d: int, m: int) -> None:
         row = self.W.setdefault(c, Counter())

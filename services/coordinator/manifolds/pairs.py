@@ -1,0 +1,134 @@
+"""`behaviour.same_behaviour` over many neighbour pairs at once (pure): numpy over arrays of
+the stored poses' joint angles instead of a Python call per pair.
+
+The running map asks the same question of every pair a batch links (grouping's links, the
+speck votes): both viable, the same digits touching, every digit's mean joint-angle
+difference within a tolerance. Here each pose is a row once (its digits and its joint
+layout, the joint names in its stored order, as small integers; its angles in that order),
+and a batch's pairs are answered by a few array operations per layout.
+
+The answer is `joint_difference`'s float itself, so a caller compares it with any tolerance:
+the columns are summed in the order `joint_difference` sums the names (its plan for the
+intersection of two equal name sets, computed by the same expression), each sum starting at
+0 and divided by the group's size, so each pair gets the same float to the last bit. Pairs
+the arrays do not decide (joint layouts that differ, no joints: `slid` decides, a NaN
+angle) are NaN: the caller asks `same_behaviour` for those, in its own argument order.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
+from graspscape.services.coordinator.mapspace.lattice import Point
+
+NOT_SAME = math.inf  # not both viable, or other digits: never within a tolerance
+
+
+class PairBehaviour:
+    """The joint difference of neighbour pairs (`differences`) for the poses `add`ed."""
+
+    def __init__(self) -> None:
+        self._row: dict[Point, int] = {}
+        self._digits: dict[frozenset[str], int] = {}
+        self._layouts: dict[tuple[str, ...], int] = {}
+        self._plans: list[list[list[int]]] = []  # per layout: its digits' column groups
+        self._n = 0
+        self._viable = np.zeros(0, dtype=bool)
+        self._kind = np.zeros(0, dtype=np.int64)  # digits id
+        self._layout = np.zeros(0, dtype=np.int64)  # -1: no joints, or NaN among them
+        self._angles = np.zeros((0, 0))
+
+    def add(self, poses: Mapping[Point, StoredPose]) -> None:
+        """Rows for poses not seen yet."""
+        new = [(p, s) for p, s in poses.items() if p not in self._row]
+        if not new:
+            return
+        viable, kind, layout, angles = [], [], [], []
+        for p, s in new:
+            self._row[p] = self._n + len(viable)
+            viable.append(s.viable)
+            kind.append(self._digits.setdefault(s.digits, len(self._digits)))
+            names = tuple(s.joints)
+            values = list(s.joints.values())
+            lay = self._layout_of(names) if names and not any(v != v for v in values) else -1
+            layout.append(lay)
+            angles.append(values)
+        width = max(self._angles.shape[1], *(len(v) for v in angles))
+        block = np.full((len(new), width), np.nan)
+        for i, values in enumerate(angles):
+            block[i, : len(values)] = values
+        old = self._angles
+        if old.shape[1] < width:
+            old = np.pad(old, ((0, 0), (0, width - old.shape[1])), constant_values=np.nan)
+        self._angles = np.concatenate([old, block])
+        self._viable = np.concatenate([self._viable, viable])
+        self._kind = np.concatenate([self._kind, np.array(kind, dtype=np.int64)])
+        self._layout = np.concatenate([self._layout, np.array(layout, dtype=np.int64)])
+        self._n += len(new)
+
+    def _layout_of(self, names: tuple[str, ...]) -> int:
+        got = self._layouts.get(names)
+        if got is None:
+            got = self._layouts[names] = len(self._plans)
+            # joint_difference's plan for two poses of this layout: the intersection of two
+            # equal sets, as same_behaviour computes it, grouped by digit in its order
+            shared = tuple(set(names) & set(names))
+            column = {name: i for i, name in enumerate(names)}
+            groups: dict[str, list[int]] = {}
+            for j in shared:
+                groups.setdefault(j.split("_")[0], []).append(column[j])
+            self._plans.append(list(groups.values()))
+        return got
+
+    def differences(self, pairs: Sequence[tuple[Point, Point]]) -> np.ndarray:
+        """Per pair: `joint_difference` of the two (NOT_SAME where they are not both viable
+        with the same digits; NaN where `same_behaviour` must decide)."""
+        out = np.full(len(pairs), np.nan)
+        if not pairs:
+            return out
+        row = self._row
+        a = np.fromiter((row[p] for p, _ in pairs), dtype=np.int64, count=len(pairs))
+        b = np.fromiter((row[q] for _, q in pairs), dtype=np.int64, count=len(pairs))
+        differ = ~(self._viable[a] & self._viable[b]) | (self._kind[a] != self._kind[b])
+        out[differ] = NOT_SAME
+        lay_a, lay_b = self._layout[a], self._layout[b]
+        decided = ~differ & (lay_a == lay_b) & (lay_a >= 0)
+        for lay in np.unique(lay_a[decided]).tolist():
+            at = np.flatnonzero(decided & (lay_a == lay))
+            delta = np.abs(self._angles[a[at]] - self._angles[b[at]])
+            worst = None
+            for columns in self._plans[lay]:
+                mean = _summed([delta[:, c] for c in columns]) / len(columns)
+                worst = mean if worst is None else np.maximum(worst, mean)
+            if worst is not None:
+                out[at] = worst
+        return out
+
+
+def _summed(terms: list[np.ndarray]) -> np.ndarray:
+    """What the built-in `sum` of each row's terms gives, to the last bit: from 0 (so the
+    first term exactly), plain additions before Python 3.12, Neumaier's compensated ones
+    from 3.12 on (its C loop, branch for branch)."""
+    total = terms[0] + 0.0
+    if sys.version_info < (3, 12):
+        for x in terms[1:]:
+            total = total + x
+        return total
+    comp = np.zeros_like(total)
+    for x in terms[1:]:
+        t = total + x
+        comp = comp + np.where(np.abs(total) >= np.abs(x), (total - t) + x, (x - t) + total)
+        total = t
+    fix = (comp != 0) & np.isfinite(comp)
+    return np.where(fix, total + comp, total)
+
+
+def within(difference: float, a: StoredPose, b: StoredPose, tolerance: float) -> bool:
+    """same_behaviour(a, b, tolerance) given the pair's `differences` entry."""
+    if difference == difference:
+        return difference <= tolerance
+    return same_behaviour(a, b, tolerance)
