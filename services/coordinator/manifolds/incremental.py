@@ -117,8 +117,13 @@ class IncrementalGrouping:
                 if self._unlink(pair) and self._comp_of[pair[0]] == self._comp_of[pair[1]]:
                     self._split(*pair)
         moved, self._moved = self._moved, []
-        self._votes.sync(sorted(p for p, s in new.items() if s.viable), moved,
-                         {(p, q): d for (p, q, _, _, _), d in zip(links, diffs, strict=True)})
+        by_point: dict[Point, dict[Point, float]] = {}
+        for (p, q, _, _, _), d in zip(links, diffs, strict=True):
+            got = by_point.get(p)
+            if got is None:
+                got = by_point[p] = {}
+            got[q] = d
+        self._votes.sync(sorted(p for p, s in new.items() if s.viable), moved, by_point)
 
     def _links_of(self, new: Mapping[Point, StoredPose]) -> list[Link]:
         """The links a batch's new points may make, in the order they are made: p → q of

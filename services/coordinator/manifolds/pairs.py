@@ -37,38 +37,54 @@ class PairBehaviour:
         self._layouts: dict[tuple[str, ...], int] = {}
         self._plans: list[list[list[int]]] = []  # per layout: its digits' column groups
         self._n = 0
+        # Per row, room for twice the rows held (a batch appends without copying the map):
         self._viable = np.zeros(0, dtype=bool)
         self._kind = np.zeros(0, dtype=np.int64)  # digits id
         self._layout = np.zeros(0, dtype=np.int64)  # -1: no joints, or NaN among them
-        self._angles = np.zeros((0, 0))
+        self._angles = np.zeros((0, 0))  # in the layout's order, NaN beyond its width
 
     def add(self, poses: Mapping[Point, StoredPose]) -> None:
         """Rows for poses not seen yet."""
         new = [(p, s) for p, s in poses.items() if p not in self._row]
         if not new:
             return
-        viable, kind, layout, angles = [], [], [], []
-        for p, s in new:
-            self._row[p] = self._n + len(viable)
-            viable.append(s.viable)
-            kind.append(self._digits.setdefault(s.digits, len(self._digits)))
-            names = tuple(s.joints)
+        kind, layout, angles = [], [], []
+        digits, row, start = self._digits, self._row, self._n
+        for k, (p, s) in enumerate(new):
+            row[p] = start + k
+            kind.append(digits.setdefault(s.digits, len(digits)))
             values = list(s.joints.values())
-            lay = self._layout_of(names) if names and not any(v != v for v in values) else -1
-            layout.append(lay)
+            layout.append(self._layout_of(tuple(s.joints))
+                          if values and not any(v != v for v in values) else -1)
             angles.append(values)
-        width = max(self._angles.shape[1], *(len(v) for v in angles))
-        block = np.full((len(new), width), np.nan)
-        for i, values in enumerate(angles):
-            block[i, : len(values)] = values
-        old = self._angles
-        if old.shape[1] < width:
-            old = np.pad(old, ((0, 0), (0, width - old.shape[1])), constant_values=np.nan)
-        self._angles = np.concatenate([old, block])
-        self._viable = np.concatenate([self._viable, viable])
-        self._kind = np.concatenate([self._kind, np.array(kind, dtype=np.int64)])
-        self._layout = np.concatenate([self._layout, np.array(layout, dtype=np.int64)])
-        self._n += len(new)
+        width = max(len(v) for v in angles)
+        self._room(start + len(new), width)
+        end = start + len(new)
+        self._viable[start:end] = [s.viable for _, s in new]
+        self._kind[start:end] = kind
+        self._layout[start:end] = layout
+        if all(len(v) == width for v in angles):
+            if width:
+                self._angles[start:end, :width] = angles
+        else:
+            for k, values in enumerate(angles):
+                self._angles[start + k, : len(values)] = values
+        self._n = end
+
+    def _room(self, rows: int, width: int) -> None:
+        have, wide = self._angles.shape
+        if rows <= have and width <= wide:
+            return
+        size = max(rows, 2 * have, 64)
+        width = max(width, wide)
+        angles = np.full((size, width), np.nan)
+        angles[:have, :wide] = self._angles
+        self._angles = angles
+        for name in ("_viable", "_kind", "_layout"):
+            old = getattr(self, name)
+            grown = np.zeros(size, dtype=old.dtype)
+            grown[:have] = old
+            setattr(self, name, grown)
 
     def _layout_of(self, names: tuple[str, ...]) -> int:
         got = self._layouts.get(names)

@@ -96,11 +96,11 @@ class SpeckVotes:
         self._comps.update(cids)
 
     def sync(self, new: Iterable[Point], moved: Iterable[Point],
-             diffs: Mapping[tuple[Point, Point], float] | None = None) -> None:
+             diffs: Mapping[Point, Mapping[Point, float]] | None = None) -> None:
         """Bring W up to date: the points that changed component first, then the new
         viable points' links (to every viable point counted so far, the batch's earlier
-        ones included). `diffs`: the joint differences of (new point, neighbour) pairs the
-        grouping has worked out for the batch (manifolds/pairs.py); pairs not there are
+        ones included). `diffs`: new point → neighbour → their joint difference, as the
+        grouping has worked it out for the batch (manifolds/pairs.py); pairs not there are
         asked of `same_behaviour`."""
         rec, comp_of = self._rec, self._comp_of
         for x in moved:
@@ -108,6 +108,7 @@ class SpeckVotes:
             if old is not None and old != comp_of[x]:
                 self._rehome(x, old, comp_of[x])
         samples, known = self.samples, diffs or {}
+        none: dict[Point, float] = {}
         nan = math.nan
 
         def near(p: Point, q: Point, d: float) -> bool:
@@ -129,11 +130,12 @@ class SpeckVotes:
             mine = neighbours(x)
             out_x = self._out.setdefault(x, {})
             in_x = self._in.setdefault(x, {})
+            diff_x = known.get(x, none)
             for q, m in Counter(mine).items():
                 cq = rec.get(q)
                 if cq is None:
                     continue
-                d = known.get((x, q), nan)
+                d = diff_x.get(q, nan)
                 if near(x, q, d):
                     out_x[q] = m
                     self._in[q][x] = m
