@@ -33,7 +33,8 @@ from collections.abc import Hashable, Iterable, Mapping
 from typing import Protocol
 
 from graspscape.services.coordinator.manifolds.behaviour import JOINT_TOLERANCE_RAD, StoredPose
-from graspscape.services.coordinator.manifolds.pairs import PairBehaviour, within
+from graspscape.services.coordinator.manifolds.grouping import SPECK_TOLERANCE_RAD
+from graspscape.services.coordinator.manifolds.pairs import PairBehaviour, answers
 from graspscape.services.coordinator.manifolds.specks import SpeckVotes
 from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
@@ -99,14 +100,16 @@ class IncrementalGrouping:
             if s.viable:
                 self._new_component(p)
         links = self._links_of(new)
-        # Whether each pair behaves alike, for the whole batch at once (manifolds/pairs.py);
-        # the speck votes ask the same pairs with their own tolerance.
-        diffs = self._pairs.differences([(p, q) for p, q, _, _, _ in links]).tolist()
+        # Whether each pair behaves alike, for the whole batch at once (manifolds/pairs.py):
+        # bit 1 p → q, bit 2 q → p; the speck votes ask the same pairs with their tolerance.
+        pairs = [(p, q) for p, q, _, _, _ in links]
+        diffs = self._pairs.differences(pairs)
+        same = answers(pairs, diffs, self.samples, JOINT_TOLERANCE_RAD)
         link = self._link
-        for (p, q, mid, back, mid_back), d in zip(links, diffs, strict=True):
-            link(p, q, mid, d)
+        for (p, q, mid, back, mid_back), ok in zip(links, same, strict=True):
+            link(p, q, mid, ok & 1)
             if back:
-                link(q, p, mid_back, d)
+                link(q, p, mid_back, ok & 2)
         # Then the links the new points cut (all of them made before this batch), one at a
         # time: a connected component less one link is at most two parts, so the search
         # from the link's ends finds the whole part that left. (Cutting them all first and
@@ -117,12 +120,13 @@ class IncrementalGrouping:
                 if self._unlink(pair) and self._comp_of[pair[0]] == self._comp_of[pair[1]]:
                     self._split(*pair)
         moved, self._moved = self._moved, []
-        by_point: dict[Point, dict[Point, float]] = {}
-        for (p, q, _, _, _), d in zip(links, diffs, strict=True):
+        by_point: dict[Point, dict[Point, int]] = {}
+        for (p, q), ok in zip(pairs, answers(pairs, diffs, self.samples, SPECK_TOLERANCE_RAD),
+                              strict=True):
             got = by_point.get(p)
             if got is None:
                 got = by_point[p] = {}
-            got[q] = d
+            got[q] = ok
         self._votes.sync(sorted(p for p, s in new.items() if s.viable), moved, by_point)
 
     def _links_of(self, new: Mapping[Point, StoredPose]) -> list[Link]:
@@ -166,15 +170,15 @@ class IncrementalGrouping:
             self._attitude_cache[p.attitude] = got
         return got
 
-    def _link(self, p: Point, q: Point, mid: Point | None, diff: float) -> None:
-        """Link p → q as `grouping.components` does: both viable, the same behaviour (`diff`:
-        the pair's `PairBehaviour.differences` entry), and the midpoint between them (if
-        any) not stored."""
+    def _link(self, p: Point, q: Point, mid: Point | None, same: int) -> None:
+        """Link p → q as `grouping.components` does: both viable, the same behaviour (`same`:
+        `same_behaviour(p's, q's)`, as `pairs.answers` gave it), and the midpoint between
+        them (if any) not stored."""
         samples = self.samples
         if mid is not None and mid in samples:
             return
         a, b = samples[p], samples[q]
-        if not (a.viable and b.viable and within(diff, a, b, JOINT_TOLERANCE_RAD)):
+        if not (a.viable and b.viable and same):
             return
         pair = (p, q) if p < q else (q, p)  # _pair(p, q)
         n = self._count.get(pair, 0)
@@ -293,6 +297,12 @@ class IncrementalGrouping:
             parts.setdefault(fold.get(cid, cid), []).append(c)
         return sorted((ps[0] if len(ps) == 1 else sorted(x for c in ps for x in c)
                        for ps in parts.values()), key=lambda g: g[0])
+
+    @property
+    def batch_neighbours(self) -> dict[Point, list[Point]]:
+        """`neighbours` of the points the last batch asked about (shared: a neighbour list is
+        a pure function of the point, so it stays true after the batch)."""
+        return self._votes.hoods
 
     def comp_of(self, p: Point) -> int | None:
         return self._comp_of.get(p)

@@ -7,12 +7,13 @@ difference within a tolerance. Here each pose is a row once (its digits and its 
 layout, the joint names in its stored order, as small integers; its angles in that order),
 and a batch's pairs are answered by a few array operations per layout.
 
-The answer is `joint_difference`'s float itself, so a caller compares it with any tolerance:
+The answer is `joint_difference`'s float itself, so one answer serves every tolerance
+(`answers`: the grouping's and the speck votes'):
 the columns are summed in the order `joint_difference` sums the names (its plan for the
 intersection of two equal name sets, computed by the same expression), each sum starting at
 0 and divided by the group's size, so each pair gets the same float to the last bit. Pairs
 the arrays do not decide (joint layouts that differ, no joints: `slid` decides, a NaN
-angle) are NaN: the caller asks `same_behaviour` for those, in its own argument order.
+angle) are NaN: `answers` asks `same_behaviour` for those, in each argument order.
 """
 
 from __future__ import annotations
@@ -125,6 +126,18 @@ class PairBehaviour:
         return out
 
 
+def answers(pairs: Sequence[tuple[Point, Point]], differences: np.ndarray,
+            samples: Mapping[Point, StoredPose], tolerance: float) -> list[int]:
+    """same_behaviour of each pair with this tolerance, both ways round, as bits: 1 for
+    (p, q), 2 for (q, p) (the arrays' answers are the same both ways; a pair they leave
+    open, NaN, is asked of `same_behaviour` in each order)."""
+    out = (3 * (differences <= tolerance)).tolist()  # NaN compares False
+    for k in np.flatnonzero(np.isnan(differences)).tolist():
+        a, b = samples[pairs[k][0]], samples[pairs[k][1]]
+        out[k] = same_behaviour(a, b, tolerance) + 2 * same_behaviour(b, a, tolerance)
+    return out
+
+
 def _summed(terms: list[np.ndarray]) -> np.ndarray:
     """What the built-in `sum` of each row's terms gives, to the last bit: from 0 (so the
     first term exactly), plain additions before Python 3.12, Neumaier's compensated ones
@@ -141,10 +154,3 @@ def _summed(terms: list[np.ndarray]) -> np.ndarray:
         total = t
     fix = (comp != 0) & np.isfinite(comp)
     return np.where(fix, total + comp, total)
-
-
-def within(difference: float, a: StoredPose, b: StoredPose, tolerance: float) -> bool:
-    """same_behaviour(a, b, tolerance) given the pair's `differences` entry."""
-    if difference == difference:
-        return difference <= tolerance
-    return same_behaviour(a, b, tolerance)
