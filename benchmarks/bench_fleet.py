@@ -24,9 +24,8 @@ every tile done). Writes benchmarks/results/fleet.json (or `--results NAME`).
     .venv/bin/python benchmarks/bench_fleet.py [--workers 10,100,1000] [--per-proc 125]
         [--via-router [--coordinators K]] [--results fleet]
 
-With `--coordinators K` (and `--via-router`), K coordinator processes serve the one
-database, each a zenoh client of the router: the workers' queries reach whichever the router
-picks; coordinator_<i>_* figures are each one's, coordinator_cores_nN their sum.
+`--coordinators K` (with `--via-router`): K coordinators on the one database, each a zenoh
+client of the router; coordinator_<i>_* figures are each one's, coordinator_cores_nN the sum.
 """
 
 from __future__ import annotations
@@ -52,6 +51,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from benchmarks._results import write_results  # noqa: E402
+from benchmarks._serve import start_coordinators  # noqa: E402
 
 PG_ADMIN = "postgresql://postgres@127.0.0.1:5432/postgres"
 PG_DB = "bench_query"
@@ -175,7 +175,7 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
         else:
             zenoh_args = ["--zenoh-listen", endpoint]
         with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as logs:
-            started = _coordinators(coordinators, url, zenoh_args, tmp, logs,
+            started = start_coordinators(coordinators, url, zenoh_args, tmp, logs,
                                     None if log is None else f"{log}.n{n}")
             fleet, outs = [], []
             for first in range(0, n, per_proc):
@@ -206,45 +206,6 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
     finally:
         _drop(schema)
     return _figures(n, samples, tallies, accounting, rss_peak_kb, coordinators)
-
-
-def _coordinators(k: int, url: str, zenoh_args: list[str], tmp: str,
-                  logs: contextlib.ExitStack, log: str | None) -> list[subprocess.Popen]:  # type: ignore[type-arg]
-    """`graspscape serve` k times on the one database (each on a free HTTP port, with a data
-    folder of its own), started and answering. --coordinator-log: each one's log at info level
-    (the orphan sweep's and requeues' lines); otherwise warnings, discarded."""
-    started, ports = [], []
-    for i in range(k):
-        ports.append(_free_port())
-        name = log if log is None or k == 1 else f"{log}.c{i + 1}"
-        sink = (logs.enter_context(open(name, "w")) if name is not None  # noqa: SIM115
-                else subprocess.DEVNULL)
-        data = Path(tmp) / f"coordinator_{i + 1}"
-        data.mkdir()
-        started.append(subprocess.Popen(
-            [sys.executable, "-m", "graspscape.services.local.cli", "serve",
-             "--database-url", url, "--port", str(ports[-1]), "--no-migrate",
-             "--log-level", "info" if log is not None else "warning", *zenoh_args],
-            cwd=REPO, env={**os.environ, "GRASPSCAPE_DATABASE__DATA_DIR": str(data)},
-            stdout=sink, stderr=sink))
-    for port, proc in zip(ports, started, strict=True):
-        _wait_http(port, proc)
-    return started
-
-
-def _wait_http(port: int, coordinator: subprocess.Popen) -> None:
-    import httpx
-
-    deadline = time.monotonic() + 300  # a loaded machine: imports alone can take a minute
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=5).status_code == 200:
-                return
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.5)
-    coordinator.kill()
-    raise RuntimeError("the coordinator did not start")
 
 
 # What the database's sessions of the run do, sampled with each progress sample: batches
@@ -318,8 +279,8 @@ def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int],  # ty
         f"fleet_processes_cores_n{n}": round((f1 - f0) / (t1 - t0), 2) if t1 > t0 else 0.0,
         f"machine_busy_cores_n{n}": round((m1 - m0) / (t1 - t0), 2) if t1 > t0 else 0.0,
     }
-    names = (["coordinator"] if coordinators == 1
-             else [f"coordinator_{i + 1}" for i in range(coordinators)])
+    names = [f"coordinator_{i + 1}" for i in range(coordinators)] if coordinators > 1 else [
+        "coordinator"]
     for i, who in enumerate([*names, "router"][:len(rss_peak_kb)]):
         figures.update({
             f"{who}_cores_n{n}": round((c1[i] - c0[i]) / (t1 - t0), 2) if t1 > t0 else 0.0,
@@ -369,8 +330,7 @@ def main() -> int:
     parser.add_argument("--coordinator-log", type=Path, default=None,
                         help="the coordinator's log at info level into PATH.n<N>")
     parser.add_argument("--coordinators", type=int, default=1,
-                        help="coordinator processes on the one database (more than one: "
-                        "with --via-router, each a zenoh client of the router)")
+                        help="coordinators on the one database (> 1: with --via-router)")
     parser.add_argument("--results", default="fleet",
                         help="results file name, benchmarks/results/<name>.json")
     args = parser.parse_args()
@@ -393,8 +353,7 @@ def main() -> int:
                 "router_* figures are that process's" if args.via_router
                 else "the coordinator's embedded zenoh peer, which the workers connect to")
     who = ("coordinator: graspscape serve" if args.coordinators == 1 else
-           f"coordinators: {args.coordinators} × graspscape serve on the one database, "
-           "each")
+           f"coordinators: {args.coordinators} × graspscape serve on the one database, each")
     write_results(args.results, figures, extra={"note": (
         f"{who} (PostgreSQL 127.0.0.1) in its own process; zenoh: "
         f"{topology}; workers: zenoh client sessions, one per simulated worker, --per-proc "
