@@ -55,7 +55,7 @@ class PairBehaviour:
             row[p] = start + k
             kind.append(digits.setdefault(s.digits, len(digits)))
             values = list(s.joints.values())
-            layout.append(self._layout_of(tuple(s.joints))
+            layout.append(self._layout_of(s.joints)
                           if values and not any(v != v for v in values) else -1)
             angles.append(values)
         width = max(len(v) for v in angles)
@@ -87,13 +87,17 @@ class PairBehaviour:
             grown[:have] = old
             setattr(self, name, grown)
 
-    def _layout_of(self, names: tuple[str, ...]) -> int:
+    def _layout_of(self, joints: Mapping[str, float]) -> int:
+        names = tuple(joints)
         got = self._layouts.get(names)
         if got is None:
             got = self._layouts[names] = len(self._plans)
             # joint_difference's plan for two poses of this layout: the intersection of two
-            # equal sets, as same_behaviour computes it, grouped by digit in its order
-            shared = tuple(set(names) & set(names))
+            # equal sets, as same_behaviour computes it, grouped by digit in its order. The
+            # sets are made from the dict, as there: a set made from a dict is sized for it
+            # at once, one made from a tuple grows as it goes, and the two may iterate in
+            # different orders (the float sum with them).
+            shared = tuple(set(joints) & set(joints))
             column = {name: i for i, name in enumerate(names)}
             groups: dict[str, list[int]] = {}
             for j in shared:
