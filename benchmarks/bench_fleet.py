@@ -22,7 +22,10 @@ accounting: every pose stored once (rows = planned poses = Σ acks' inserted, Σ
 every tile done). Writes benchmarks/results/fleet.json (or `--results NAME`).
 
     .venv/bin/python benchmarks/bench_fleet.py [--workers 10,100,1000] [--per-proc 125]
-        [--via-router] [--results fleet]
+        [--via-router [--coordinators K]] [--results fleet]
+
+`--coordinators K` (with `--via-router`): K coordinators on the one database, each a zenoh
+client of the router; coordinator_<i>_* figures are each one's, coordinator_cores_nN the sum.
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from benchmarks._results import write_results  # noqa: E402
+from benchmarks._serve import start_coordinators  # noqa: E402
 
 PG_ADMIN = "postgresql://postgres@127.0.0.1:5432/postgres"
 PG_DB = "bench_query"
@@ -150,13 +154,12 @@ def _accounting(url: str, eid: int) -> dict[str, int]:
 
 def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
         via_router: bool, log: Path | None = None,
-        router_args: list[str] | None = None) -> dict[str, float]:
+        router_args: list[str] | None = None, coordinators: int = 1) -> dict[str, float]:
     url, schema = _schema_url()
     try:
         target = max(20 * TILE_POSES, int(n / pose_s * seconds))
         eid = _exploration(url, target)
         endpoint = f"tcp/127.0.0.1:{_free_port()}"
-        port = _free_port()
         router = None
         if via_router:
             # The topology docker-compose.yml runs: workers and the coordinator are clients
@@ -172,17 +175,8 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
         else:
             zenoh_args = ["--zenoh-listen", endpoint]
         with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as logs:
-            # --coordinator-log: its log at info level (the orphan sweep's and requeues'
-            # lines), per N; otherwise warnings, discarded.
-            sink = (logs.enter_context(open(f"{log}.n{n}", "w")) if log is not None
-                    else subprocess.DEVNULL)
-            coordinator = subprocess.Popen(
-                [sys.executable, "-m", "graspscape.services.local.cli", "serve",
-                 "--database-url", url, "--port", str(port), "--no-migrate",
-                 "--log-level", "info" if log is not None else "warning", *zenoh_args],
-                cwd=REPO, env={**os.environ, "GRASPSCAPE_DATABASE__DATA_DIR": tmp},
-                stdout=sink, stderr=sink)
-            _wait_http(port, coordinator)
+            started = start_coordinators(coordinators, url, zenoh_args, tmp, logs,
+                                    None if log is None else f"{log}.n{n}")
             fleet, outs = [], []
             for first in range(0, n, per_proc):
                 out = Path(tmp) / f"tally_{first}.json"
@@ -191,14 +185,14 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
                     [sys.executable, str(REPO / "benchmarks" / "fleet_workers.py"), endpoint,
                      str(min(per_proc, n - first)), str(first), str(pose_s), str(out)],
                     cwd=REPO))
-            pids = [coordinator.pid] + ([router.pid] if router is not None else [])
+            pids = [c.pid for c in started] + ([router.pid] if router is not None else [])
             samples = _trace(url, eid, pids, timeout, [proc.pid for proc in fleet])
             for proc in fleet:
                 proc.send_signal(signal.SIGTERM)
             for proc in fleet:
                 proc.wait(timeout=120)
             rss_peak_kb = [_proc_kb(pid, "VmHWM") for pid in pids]
-            for proc in (coordinator, router):
+            for proc in (*started, router):
                 if proc is None:
                     continue
                 proc.send_signal(signal.SIGTERM)
@@ -211,22 +205,7 @@ def run(n: int, *, per_proc: int, pose_s: float, seconds: float, timeout: float,
         accounting = _accounting(url, eid)
     finally:
         _drop(schema)
-    return _figures(n, samples, tallies, accounting, rss_peak_kb)
-
-
-def _wait_http(port: int, coordinator: subprocess.Popen) -> None:
-    import httpx
-
-    deadline = time.monotonic() + 300  # a loaded machine: imports alone can take a minute
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=5).status_code == 200:
-                return
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.5)
-    coordinator.kill()
-    raise RuntimeError("the coordinator did not start")
+    return _figures(n, samples, tallies, accounting, rss_peak_kb, coordinators)
 
 
 # What the database's sessions of the run do, sampled with each progress sample: batches
@@ -269,7 +248,8 @@ def _trace(url: str, eid: int, pids: list[int], timeout: float,
     return samples
 
 
-def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int]) -> dict[str, float]:  # type: ignore[no-untyped-def]
+def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int],  # type: ignore[no-untyped-def]
+             coordinators: int = 1) -> dict[str, float]:
     total = samples[-1][2]
 
     def at(fraction: float):  # type: ignore[no-untyped-def]
@@ -299,12 +279,17 @@ def _figures(n: int, samples, tallies, accounting, rss_peak_kb: list[int]) -> di
         f"fleet_processes_cores_n{n}": round((f1 - f0) / (t1 - t0), 2) if t1 > t0 else 0.0,
         f"machine_busy_cores_n{n}": round((m1 - m0) / (t1 - t0), 2) if t1 > t0 else 0.0,
     }
-    for i, who in enumerate(["coordinator", "router"][:len(rss_peak_kb)]):
+    names = [f"coordinator_{i + 1}" for i in range(coordinators)] if coordinators > 1 else [
+        "coordinator"]
+    for i, who in enumerate([*names, "router"][:len(rss_peak_kb)]):
         figures.update({
             f"{who}_cores_n{n}": round((c1[i] - c0[i]) / (t1 - t0), 2) if t1 > t0 else 0.0,
             f"{who}_rss_peak_mb_n{n}": round(rss_peak_kb[i] / 1024, 1),
             f"{who}_anonymous_peak_mb_n{n}": round(max(s[4][i] for s in samples) / 1024, 1),
         })
+    if coordinators > 1:  # the coordinators together
+        figures[f"coordinator_cores_n{n}"] = round(sum(
+            figures[f"{who}_cores_n{n}"] for who in names), 2)
     figures.update({
         f"rows_stored_n{n}": accounting["rows"],
         f"rows_planned_n{n}": accounting["planned"],
@@ -344,9 +329,13 @@ def main() -> int:
                         help="the router's transport/unicast/max_sessions (zenoh: 1,000)")
     parser.add_argument("--coordinator-log", type=Path, default=None,
                         help="the coordinator's log at info level into PATH.n<N>")
+    parser.add_argument("--coordinators", type=int, default=1,
+                        help="coordinators on the one database (> 1: with --via-router)")
     parser.add_argument("--results", default="fleet",
                         help="results file name, benchmarks/results/<name>.json")
     args = parser.parse_args()
+    if args.coordinators > 1 and not args.via_router:
+        parser.error("--coordinators above 1 needs --via-router")
     figures: dict[str, float] = {"load_avg_1min_start": round(os.getloadavg()[0], 2)}
     for n in (int(x) for x in args.workers.split(",")):
         got = run(n, per_proc=args.per_proc, pose_s=args.pose_s, seconds=args.seconds,
@@ -354,7 +343,8 @@ def main() -> int:
                   router_args=[*(["--accept-pending", str(args.router_accept_pending)]
                                  if args.router_accept_pending else []),
                                *(["--max-sessions", str(args.router_max_sessions)]
-                                 if args.router_max_sessions else [])])
+                                 if args.router_max_sessions else [])],
+                  coordinators=args.coordinators)
         print(json.dumps(got), flush=True)
         figures.update(got)
         figures[f"load_avg_1min_after_n{n}"] = round(os.getloadavg()[0], 2)
@@ -362,8 +352,10 @@ def main() -> int:
                 "process) that the coordinator (zenoh client) and the workers connect to; "
                 "router_* figures are that process's" if args.via_router
                 else "the coordinator's embedded zenoh peer, which the workers connect to")
+    who = ("coordinator: graspscape serve" if args.coordinators == 1 else
+           f"coordinators: {args.coordinators} × graspscape serve on the one database, each")
     write_results(args.results, figures, extra={"note": (
-        "coordinator: graspscape serve (PostgreSQL 127.0.0.1) in its own process; zenoh: "
+        f"{who} (PostgreSQL 127.0.0.1) in its own process; zenoh: "
         f"{topology}; workers: zenoh client sessions, one per simulated worker, --per-proc "
         "per OS process, all on the same machine as the coordinator and the database; "
         "poses_per_s between 10 % and 90 % of the exploration stored; latencies as the "

@@ -6,9 +6,10 @@ from datetime import datetime
 from typing import Any
 
 from graspscape.services.coordinator.mapspace.pose import PoseValues as PoseValues
+from graspscape.services.coordinator.store.pose_columns import METRIC_COLUMNS
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.results import Outcome
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
 
 class ExplorationOut(BaseModel):
@@ -107,7 +108,7 @@ class ExplorationCreated(BaseModel):
         "resting pose, most probable first (`id` is the first); empty for a free object")
 
 
-class PoseOut(PoseValues):
+class _PoseHead(PoseValues):
     model_config = ConfigDict(from_attributes=True)
 
     id: int
@@ -123,25 +124,17 @@ class PoseOut(PoseValues):
     worker_id: str | None
     eval_time_s: float
     created_at: datetime
-    # Null where the worker did not compute the value (see SimSettings; held poses only).
-    mu_g: float | None = Field(default=None, description="grasp-matrix metric μg")
-    mu_f: float | None = Field(default=None, description="Ferrari–Canny ε (μf)")
-    mu_m: float | None = Field(default=None, description="perturbation resistance μm, "
-                               "in object weights")
-    torque_margin_nm: float | None = Field(
-        default=None, description="least closing effort at which the grasp still holds, N·m")
-    torque_margin_ratio: float | None = Field(
-        default=None, description="1 − torque_margin_nm / the closing effort used")
-    friction_margin: float | None = Field(
-        default=None, description="least object friction coefficient that still holds")
-    gravity_test_share: float | None = Field(
-        default=None, description="share of the 6 gravity directions passed")
-    force_test_share: float | None = Field(
-        default=None, description="share of the 6 external force directions passed")
-    tug_force_n: float | None = Field(
-        default=None, description="pull along the approach axis at which the object slips, N")
-    shake_survival_s: float | None = Field(
-        default=None, description="time into the shake at which the object falls off, s")
+
+
+# The measured qualities (store/pose_columns.py), in the row's order; null where the worker
+# did not compute the value (see SimSettings; held poses only).
+_PoseMetrics: Any = create_model(
+    "_PoseMetrics", __base__=_PoseHead,
+    **{c.name: (float | None, Field(default=None, description=c.description))
+       for c in METRIC_COLUMNS})
+
+
+class PoseOut(_PoseMetrics):  # type: ignore[misc]
     error: str | None = Field(
         default=None, description="outcome `error` only: what the evaluation of this pose "
         "raised")

@@ -32,11 +32,15 @@ from collections import deque
 from collections.abc import Hashable, Iterable, Mapping
 from typing import Protocol
 
-from graspscape.services.coordinator.manifolds.behaviour import StoredPose, same_behaviour
+from graspscape.services.coordinator.manifolds.behaviour import JOINT_TOLERANCE_RAD, StoredPose
+from graspscape.services.coordinator.manifolds.grouping import SPECK_TOLERANCE_RAD
+from graspscape.services.coordinator.manifolds.pairs import PairBehaviour, answers
 from graspscape.services.coordinator.manifolds.specks import SpeckVotes
 from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 
 Pair = tuple[Point, Point]
+# p → q, its midpoint, whether q → p is made too (q stored before the batch), that one's
+Link = tuple[Point, Point, "Point | None", bool, "Point | None"]
 
 
 def _pair(p: Point, q: Point) -> Pair:
@@ -72,6 +76,7 @@ class IncrementalGrouping:
         self.neighbours = self._votes.neighbours  # `grouping.speck_neighbours`, cached
         self._moved: list[Point] = []  # points that changed component in this batch
         self._attitude_cache: dict[int, tuple[int, ...]] = {}  # `_attitudes`
+        self._pairs = PairBehaviour()  # the poses' behaviour as arrays, for a batch's pairs
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -90,32 +95,21 @@ class IncrementalGrouping:
         if not new:
             return
         self.samples.update(new)
+        self._pairs.add(new)
         for p, s in new.items():
             if s.viable:
                 self._new_component(p)
-        # Links of the new points, each directed link once: p → q of every new point, and
-        # q → p from the points stored before this batch. The neighbour relation is
-        # symmetric level by level (q is p's level-L neighbour iff p is q's: the tests check
-        # it), so p's own neighbour lists find both.
-        lat, samples, link, make = self.lattice, self.samples, self._link, tuple.__new__
-        at = self.neighbours.at  # lat.neighbours(p, level)'s points, cached per direction cell
-        for p in sorted(new):
-            if not new[p].viable:
-                continue
-            for level in range(lat.birth(p), lat.depth + 1):
-                finest = level >= lat.depth  # lat.midpoint is None there: not asked
-                for q in at(p, level):
-                    b = samples.get(q)
-                    if b is None or not b.viable:
-                        continue
-                    link(p, q, None if finest else lat.midpoint(p, q, level))
-                    if q not in new:
-                        link(q, p, None if finest else lat.midpoint(q, p, level))
-            K, J, i, _ = p
-            for a in self._attitudes(p):  # never cut: one link is enough
-                q = make(Point, (K, J, i, a))
-                if q in samples:
-                    link(p, q, None)
+        links = self._links_of(new)
+        # Whether each pair behaves alike, for the whole batch at once (manifolds/pairs.py):
+        # bit 1 p → q, bit 2 q → p; the speck votes ask the same pairs with their tolerance.
+        pairs = [(p, q) for p, q, _, _, _ in links]
+        diffs = self._pairs.differences(pairs)
+        same = answers(pairs, diffs, self.samples, JOINT_TOLERANCE_RAD)
+        link = self._link
+        for (p, q, mid, back, mid_back), ok in zip(links, same, strict=True):
+            link(p, q, mid, ok & 1)
+            if back:
+                link(q, p, mid_back, ok & 2)
         # Then the links the new points cut (all of them made before this batch), one at a
         # time: a connected component less one link is at most two parts, so the search
         # from the link's ends finds the whole part that left. (Cutting them all first and
@@ -126,7 +120,41 @@ class IncrementalGrouping:
                 if self._unlink(pair) and self._comp_of[pair[0]] == self._comp_of[pair[1]]:
                     self._split(*pair)
         moved, self._moved = self._moved, []
-        self._votes.sync(sorted(p for p, s in new.items() if s.viable), moved)
+        by_point: dict[Point, dict[Point, int]] = {}
+        for (p, q), ok in zip(pairs, answers(pairs, diffs, self.samples, SPECK_TOLERANCE_RAD),
+                              strict=True):
+            got = by_point.get(p)
+            if got is None:
+                got = by_point[p] = {}
+            got[q] = ok
+        self._votes.sync(sorted(p for p, s in new.items() if s.viable), moved, by_point)
+
+    def _links_of(self, new: Mapping[Point, StoredPose]) -> list[Link]:
+        """The links a batch's new points may make, in the order they are made: p → q of
+        every new point, and q → p from the points stored before this batch (`back`). The
+        neighbour relation is symmetric level by level (q is p's level-L neighbour iff p is
+        q's: the tests check it), so p's own neighbour lists find both."""
+        lat, samples, make = self.lattice, self.samples, tuple.__new__
+        at = self.neighbours.at  # lat.neighbours(p, level)'s points, cached per direction cell
+        out: list[Link] = []
+        for p in sorted(new):
+            if not new[p].viable:
+                continue
+            for level in range(lat.birth(p), lat.depth + 1):
+                finest = level >= lat.depth  # lat.midpoint is None there: not asked
+                for q in at(p, level):
+                    b = samples.get(q)
+                    if b is None or not b.viable:
+                        continue
+                    back = q not in new
+                    out.append((p, q, None if finest else lat.midpoint(p, q, level), back,
+                                None if finest or not back else lat.midpoint(q, p, level)))
+            K, J, i, _ = p
+            for a in self._attitudes(p):  # never cut: one link is enough
+                q = make(Point, (K, J, i, a))
+                if q in samples:
+                    out.append((p, q, None, False, None))
+        return out
 
     def _rebuild(self, samples: Mapping[Point, StoredPose]) -> None:
         fresh = IncrementalGrouping(self.lattice)
@@ -142,14 +170,15 @@ class IncrementalGrouping:
             self._attitude_cache[p.attitude] = got
         return got
 
-    def _link(self, p: Point, q: Point, mid: Point | None) -> None:
-        """Link p → q as `grouping.components` does: both viable, the same behaviour, and
-        the midpoint between them (if any) not stored."""
+    def _link(self, p: Point, q: Point, mid: Point | None, same: int) -> None:
+        """Link p → q as `grouping.components` does: both viable, the same behaviour (`same`:
+        `same_behaviour(p's, q's)`, as `pairs.answers` gave it), and the midpoint between
+        them (if any) not stored."""
         samples = self.samples
         if mid is not None and mid in samples:
             return
         a, b = samples[p], samples[q]
-        if not (a.viable and b.viable and same_behaviour(a, b)):
+        if not (a.viable and b.viable and same):
             return
         pair = (p, q) if p < q else (q, p)  # _pair(p, q)
         n = self._count.get(pair, 0)
@@ -268,6 +297,12 @@ class IncrementalGrouping:
             parts.setdefault(fold.get(cid, cid), []).append(c)
         return sorted((ps[0] if len(ps) == 1 else sorted(x for c in ps for x in c)
                        for ps in parts.values()), key=lambda g: g[0])
+
+    @property
+    def batch_neighbours(self) -> dict[Point, list[Point]]:
+        """`neighbours` of the points the last batch asked about (shared: a neighbour list is
+        a pure function of the point, so it stays true after the batch)."""
+        return self._votes.hoods
 
     def comp_of(self, p: Point) -> int | None:
         return self._comp_of.get(p)

@@ -54,6 +54,7 @@ from graspscape.services.coordinator.manifolds.robust import (
     large_manifolds,
     robust_scores,
 )
+from graspscape.services.coordinator.manifolds.specks import Kept
 from graspscape.services.coordinator.manifolds.summary import (
     ManifoldSummary,
     label_order,
@@ -88,6 +89,7 @@ class RunningMap:
         self.g.listener = self
         self.samples = self.g.samples
         self.hood = Neighbourhoods(lattice)
+        self._hoods: Kept | None = None  # self.hood's lists, kept while a batch is added
         self.scores: dict[Point, RobustScore] = {}
         self.comps: dict[int, Comp] = {}
         n_pos, n_a = len(self.grid.weights), self.grid.n_a
@@ -165,6 +167,7 @@ class RunningMap:
                 raise ValueError(f"the stored result of {p} changed: start a new map")
         self._moved = set()
         self.rescored = set()
+        self._hoods = Kept(self.hood, {})  # N_δ lists, asked by the scores and the flags
         if new:
             self.g.add(new.items())  # components: on_new, on_join, on_detach
             self._own(new)
@@ -177,6 +180,7 @@ class RunningMap:
                 self._touched.add(c)
         self._flags(dirty)
         self._table()
+        self._hoods = None  # not kept with the map (nor in its snapshots)
         return dirty
 
     def final(self, p: Point) -> int | None:
@@ -231,11 +235,12 @@ class RunningMap:
         return -1 if cid is None else cid
 
     def _score(self, new: Mapping[Point, StoredPose]) -> None:
+        hood = self._hoods
         affected = set(new)
         for p in new:
-            affected.update(q for q in self.hood(p) if q in self.samples)
+            affected.update(q for q in hood(p) if q in self.samples)
         for p, sc in robust_scores(self.lattice, self.samples, sorted(affected),
-                                   hood=self.hood).items():
+                                   hood=hood).items():  # type: ignore[arg-type]
             if self.scores.get(p) == sc:
                 continue
             self.scores[p] = sc
@@ -248,19 +253,22 @@ class RunningMap:
     def _flags(self, dirty: set[Point]) -> None:
         """Core and local-maximum flags of the dirty poses and their neighbours."""
         samples, grid, w = self.samples, self.grid, self.w
-        nbrs = self.g.neighbours  # grouping.speck_neighbours, cached per direction cell
+        hood = self._hoods
+        # grouping.speck_neighbours, cached per direction cell; those the batch's speck votes
+        # listed already are taken from them
+        nbrs = Kept(self.g.neighbours, self.g.batch_neighbours)
         core_check: set[Point] = set()
         max_check: set[Point] = set()
         for p in dirty:
             core_check.add(p)
-            core_check.update(self.hood(p))
+            core_check.update(hood(p))
             max_check.add(p)
             max_check.update(nbrs(p))
         for p in core_check:
             main = self.final(p)
             if main is None:
                 continue
-            is_core = all(q in samples and self.final(q) == main for q in self.hood(p))
+            is_core = all(q in samples and self.final(q) == main for q in hood(p))
             if is_core != (p in self._core):
                 comp = self.comps[self.g.comp_of(p)]  # type: ignore[index]
                 if is_core:

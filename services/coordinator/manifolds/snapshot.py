@@ -55,6 +55,7 @@ def code_version() -> str:
         grouping,
         incremental,
         live,
+        pairs,
         robust,
         running,
         specks,
@@ -63,8 +64,8 @@ def code_version() -> str:
     from graspscape.services.coordinator.mapspace import lattice, pose
 
     digest = hashlib.sha256(str(FORMAT).encode())
-    for module in (lattice, pose, aggregate, behaviour, exact, grouping, incremental, live, robust,
-                   running, specks, summary):
+    for module in (lattice, pose, aggregate, behaviour, exact, grouping, incremental, live, pairs,
+                   robust, running, specks, summary):
         digest.update(Path(module.__file__ or "").read_bytes())
     return digest.hexdigest()[:16]
 

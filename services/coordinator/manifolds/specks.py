@@ -68,6 +68,24 @@ class Neighbours:
         return out
 
 
+class Kept:
+    """A point's neighbour list (`fn(p)`, a pure function of the point) kept once asked: a
+    batch asks for the same points' lists in the grouping, the votes, the scores and the
+    flags. Lists are shared: callers must not change them."""
+
+    __slots__ = ("fn", "lists")
+
+    def __init__(self, fn: Callable[[Point], list[Point]],
+                 lists: dict[Point, list[Point]]) -> None:
+        self.fn, self.lists = fn, lists
+
+    def __call__(self, p: Point) -> list[Point]:
+        got = self.lists.get(p)
+        if got is None:
+            got = self.lists[p] = self.fn(p)
+        return got
+
+
 class SpeckVotes:
     """The fold of every speck into its large component (`fold`), kept current."""
 
@@ -88,26 +106,38 @@ class SpeckVotes:
         self._by_size: dict[int, set[int]] = {}
         self._small = MIN_POSES
         self.fold: dict[int, int] = {}  # speck → the component it is folded into
+        self.hoods: dict[Point, list[Point]] = {}  # the last batch's neighbour lists
 
     # --- feeding ---------------------------------------------------------------------------
     def changed(self, cids: Iterable[int]) -> None:
         """Components made, joined (both) or split (both) by the grouping."""
         self._comps.update(cids)
 
-    def sync(self, new: Iterable[Point], moved: Iterable[Point]) -> None:
+    def sync(self, new: Iterable[Point], moved: Iterable[Point],
+             near: Mapping[Point, Mapping[Point, int]] | None = None) -> None:
         """Bring W up to date: the points that changed component first, then the new
         viable points' links (to every viable point counted so far, the batch's earlier
-        ones included)."""
+        ones included). `near`: new point → neighbour → whether they are near (bit 1: from
+        the new point, bit 2: back), as the grouping has worked it out for the batch
+        (`pairs.answers`); pairs not there are asked of `same_behaviour`."""
         rec, comp_of = self._rec, self._comp_of
         for x in moved:
             old = rec.get(x)
             if old is not None and old != comp_of[x]:
                 self._rehome(x, old, comp_of[x])
-        near = self._near
+        known = near or {}
+        none: dict[Point, int] = {}
+        samples = self.samples
+
+        def asked(p: Point, q: Point) -> int:  # a pair the grouping did not answer
+            a, b = samples[p], samples[q]
+            return (same_behaviour(a, b, SPECK_TOLERANCE_RAD)
+                    + 2 * same_behaviour(b, a, SPECK_TOLERANCE_RAD))
+
         # A point's neighbours are a pure function of it; within one batch the same points
         # are asked for again and again (x's neighbours q, then q's to count the links back),
         # so they are kept for the batch.
-        hoods: dict[Point, list[Point]] = {}
+        hoods = self.hoods = {}  # kept until the next batch: the running map's flags ask too
 
         def neighbours(q: Point) -> list[Point]:
             got = hoods.get(q)
@@ -120,24 +150,25 @@ class SpeckVotes:
             mine = neighbours(x)
             out_x = self._out.setdefault(x, {})
             in_x = self._in.setdefault(x, {})
+            near_x = known.get(x, none)
             for q, m in Counter(mine).items():
                 cq = rec.get(q)
                 if cq is None:
                     continue
-                if near(x, q):
+                ok = near_x.get(q)
+                if ok is None:
+                    ok = asked(x, q)
+                if ok & 1:
                     out_x[q] = m
                     self._in[q][x] = m
                     if cq != cx:
                         self._add(cx, cq, m)
                 back = neighbours(q).count(x)  # q → x: as often as q's list names x
-                if back and near(q, x):
+                if back and ok & 2:
                     self._out[q][x] = back
                     in_x[q] = back
                     if cq != cx:
                         self._add(cq, cx, back)
-
-    def _near(self, p: Point, q: Point) -> bool:
-        return same_behaviour(self.samples[p], self.samples[q], SPECK_TOLERANCE_RAD)
 
     def _add(self, c: int, d: int, m: int) -> None:
         row = self.W.setdefault(c, Counter())

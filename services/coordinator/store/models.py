@@ -12,6 +12,12 @@ from enum import StrEnum
 from typing import Any
 
 from graspscape.services.coordinator.store.base import Base, utcnow
+from graspscape.services.coordinator.store.pose_columns import (  # noqa: F401 (re-exported)
+    GRASP_METRIC_COLUMNS,
+    METRIC_COLUMNS,
+    POSE_METRIC_COLUMNS,
+    ROBUSTNESS_COLUMNS,
+)
 from sqlalchemy import (
     JSON,
     Boolean,
@@ -280,19 +286,13 @@ class PoseRow(Base):
     inferred_from: Mapped[str | None] = mapped_column(String(128))
     # Outcome `error` only: what the evaluation of this pose raised (PoseResult.error).
     error: Mapped[str | None] = mapped_column(String(2000))
-    # Static grasp metrics of the synthesized grasp (PoseResult.mu_g, mu_f, mu_m) and its
-    # robustness margins and grasp tests (PoseResult.robustness, migration 0005): NULL where
-    # the worker did not compute them (not chosen in SimSettings, or the pose was not held).
-    mu_g: Mapped[float | None] = mapped_column(Float)
-    mu_f: Mapped[float | None] = mapped_column(Float)
-    mu_m: Mapped[float | None] = mapped_column(Float)
-    torque_margin_nm: Mapped[float | None] = mapped_column(Float)
-    torque_margin_ratio: Mapped[float | None] = mapped_column(Float)
-    friction_margin: Mapped[float | None] = mapped_column(Float)
-    gravity_test_share: Mapped[float | None] = mapped_column(Float)
-    force_test_share: Mapped[float | None] = mapped_column(Float)
-    tug_force_n: Mapped[float | None] = mapped_column(Float)
-    shake_survival_s: Mapped[float | None] = mapped_column(Float)
+    # The measured qualities, one nullable float column each, defined in
+    # store/pose_columns.py (static grasp metrics of the synthesized grasp, its robustness
+    # margins and grasp tests): NULL where the worker did not compute them (not chosen in
+    # SimSettings, or the pose was not held). Made here from that tuple, in its order.
+    for _metric in METRIC_COLUMNS:
+        locals()[_metric.name] = mapped_column(Float)
+    del _metric
     # The robust map (manifolds/robust.py, migration 0010), kept current with the manifolds:
     # robust success s_δ, robust quality q_δ and the label (robust, fragile, futile,
     # uncertain); NULL until the manifolds are computed with the pose stored.
@@ -320,20 +320,6 @@ Index("ix_poses_best_torque_margin_ratio", PoseRow.exploration_id, PoseRow.viabl
       PoseRow.torque_margin_ratio.desc(), PoseRow.mu_s.desc(), PoseRow.pose_key)
 Index("ix_poses_best_mu_s", PoseRow.exploration_id, PoseRow.viable, PoseRow.mu_s.desc(),
       PoseRow.pose_key)
-
-
-# The columns above, in this order: the static metrics, then RobustnessReport's fields.
-GRASP_METRIC_COLUMNS = ("mu_g", "mu_f", "mu_m")
-ROBUSTNESS_COLUMNS = (
-    "torque_margin_nm",
-    "torque_margin_ratio",
-    "friction_margin",
-    "gravity_test_share",
-    "force_test_share",
-    "tug_force_n",
-    "shake_survival_s",
-)
-POSE_METRIC_COLUMNS = GRASP_METRIC_COLUMNS + ROBUSTNESS_COLUMNS
 
 
 class WorkerRow(Base):

@@ -9,13 +9,16 @@ column through unnest()).
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from functools import lru_cache
+from operator import attrgetter
 from typing import Any
 
-from graspscape.services.coordinator.store.models import (
+from graspscape.services.coordinator.store.models import PoseRow
+from graspscape.services.coordinator.store.pose_columns import (
+    GRASP_METRIC_COLUMNS,
     POSE_METRIC_COLUMNS,
     ROBUSTNESS_COLUMNS,
-    PoseRow,
 )
 from graspscape.shared.specs.results import PoseResult
 from pydantic import BaseModel
@@ -63,25 +66,28 @@ def _values(result: PoseResult, robustness: bool = True) -> tuple[Any, ...]:
         result.inferred_from,
         result.error,
         _json_text(result.sample),
-        result.mu_g,
-        result.mu_f,
-        result.mu_m,
+        *_static(result),
     )
     if not robustness:
         return values
     rb = result.robustness
     if rb is None:
         return values + _NO_ROBUSTNESS
-    return (
-        *values,
-        rb.torque_margin_nm,
-        rb.torque_margin_ratio,
-        rb.friction_margin,
-        rb.gravity_test_share,
-        rb.force_test_share,
-        rb.tug_force_n,
-        rb.shake_survival_s,
-    )
+    return values + _report(rb)
+
+
+def _getter(names: tuple[str, ...]) -> Callable[[Any], tuple[Any, ...]]:
+    """The named attributes of an object as a tuple (operator.attrgetter: one C call per
+    result, not one Python step per column)."""
+    if not names:
+        return lambda _: ()
+    get = attrgetter(*names)
+    return get if len(names) > 1 else lambda x: (get(x),)
+
+
+# The measured qualities (store/pose_columns.py): PoseResult's, then its robustness report's.
+_static = _getter(GRASP_METRIC_COLUMNS)
+_report = _getter(ROBUSTNESS_COLUMNS)
 
 
 _PER_POSE = (

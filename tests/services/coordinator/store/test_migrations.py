@@ -58,7 +58,7 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     from graspscape.services.coordinator.store.models import PoseRow
     from graspscape.services.coordinator.store.queue import lease_tiles
     from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
-    from sqlalchemy import text
+    from sqlalchemy import inspect, text
 
     from tests.factories import fake_results
 
@@ -77,7 +77,7 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
             ingest_results(session, tile_id=t.tile_id, lease_epoch=t.lease_epoch,
                            worker_id="w", results=fake_results(t.poses()))
 
-    def snapshot() -> dict[str, object]:
+    def snapshot(pose_columns: list[str]) -> dict[str, object]:
         with engine.connect() as c:
             return {
                 table: c.execute(text(f"SELECT {columns} FROM {table} ORDER BY id")).all()
@@ -86,10 +86,9 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
                     ("explorations", "id, object_id, spec, status, tiles_total, poses_total, "
                                      "poses_done, viable_count, created_at, updated_at, "
                                      "started_at, finished_at"),
-                    # the columns of 0005 (0009 adds `error`, 0010 the robust map's, 0017 …)
-                    ("poses", ", ".join(c.name for c in PoseRow.__table__.columns
-                                        if c.name not in {"error", "robust_s", "robust_q",
-                                                          "robust_label", "certifies", "sample"})),
+                    # the columns of 0005, as that schema has them (0009 adds `error`,
+                    # 0010 the robust map's, later ones the qualities of pose_columns.py)
+                    ("poses", ", ".join(pose_columns)),
                     ("objects", "*"),
                     # the columns of 0005 (0007 adds `round`)
                     ("tiles", 'id, exploration_id, level, "index", cells, r_levels, attitudes, '
@@ -101,13 +100,16 @@ def test_0006_gives_sqlite_autoincrement_and_keeps_every_row(tmp_path) -> None:
     engine.dispose()
     command.downgrade(db.alembic_config(url), "0005")
     engine = db.make_engine(url)
-    before = snapshot()
+    at_0005 = [c["name"] for c in inspect(engine).get_columns("poses")]
+    assert {"error", "robust_s", "certifies"}.isdisjoint(at_0005)
+    assert set(at_0005) < {c.name for c in PoseRow.__table__.columns}
+    before = snapshot(at_0005)
     assert before["poses"] and all(p.tile_id is not None for p in before["poses"])
     engine.dispose()
     db.upgrade(url)
     engine = db.make_engine(url)
     sessions = db.make_sessionmaker(engine)
-    assert snapshot() == before  # every row, id and reference kept
+    assert snapshot(at_0005) == before  # every row, id and reference kept
     with engine.connect() as c:
         for table in ("explorations", "tiles"):
             sql = c.execute(text("SELECT sql FROM sqlite_master WHERE name = :t"),

@@ -13,7 +13,11 @@ from fastapi.testclient import TestClient
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.manifolds import best
 from graspscape.services.coordinator.manifolds.export import COLUMNS
-from graspscape.services.coordinator.store.models import POSE_METRIC_COLUMNS, PoseRow
+from graspscape.services.coordinator.store.models import (
+    GRASP_METRIC_COLUMNS,
+    POSE_METRIC_COLUMNS,
+    PoseRow,
+)
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.results import Outcome, PoseResult, RobustnessReport
 from graspscape.shared.wire.codec import decode_as, encode
@@ -59,7 +63,7 @@ def _results(poses: list[Any]) -> list[PoseResult]:
 
 def _expected(result: PoseResult) -> dict[str, float | None]:
     report = result.robustness.model_dump() if result.robustness is not None else {}
-    static = {"mu_g": result.mu_g, "mu_f": result.mu_f, "mu_m": result.mu_m}
+    static = {name: getattr(result, name) for name in GRASP_METRIC_COLUMNS}
     return {name: static.get(name, report.get(name)) for name in POSE_METRIC_COLUMNS}
 
 
