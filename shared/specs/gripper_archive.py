@@ -26,6 +26,7 @@ from graspscape.shared.specs.gripper import (
     URDF_DESCRIPTION,
     GripperFileError,
     GripperSpec,
+    MjcfGripperSpec,
     find_gripper,
     load_urdf_gripper,
     resolve_inside,
@@ -141,11 +142,26 @@ def check_urdf_folder(folder: Path) -> None:
     tile). A mesh that is missing is the worker's to report: it may belong to a link the
     gripper drops (an arm's, above the base link)."""
     spec = load_urdf_gripper(folder)
+    if isinstance(spec, MjcfGripperSpec):
+        _check_mjcf(folder, spec)
+        return
     urdf = resolve_inside(folder, spec.urdf)
     # The mesh names only: the worker's parser (workers/sim/gripper/urdf_import.py) is the one
     # that reads the file, and takes files other tools wrote with undeclared XML prefixes.
     for filename in _MESH_FILE.findall(urdf.read_text(errors="replace")):
         resolve_inside(folder, filename[1], urdf.parent, must_exist=False)
+
+
+# The attributes by which an MJCF reaches files: its assets and the folders they are read from.
+_MJCF_FILE = re.compile(r"""\b(file|meshdir|texturedir|assetdir)\s*=\s*["']([^"']+)["']""")
+
+
+def _check_mjcf(folder: Path, spec: MjcfGripperSpec) -> None:
+    """An MJCF gripper's folder (it travels as a folder, like a URDF's): the MJCF lies in the
+    folder and no file or asset folder it names points out of it."""
+    mjcf = resolve_inside(folder, spec.mjcf)
+    for _, filename in _MJCF_FILE.findall(mjcf.read_text(errors="replace")):
+        resolve_inside(folder, filename, mjcf.parent, must_exist=False)
 
 
 def archive_of(found: Path) -> tuple[GripperKind, bytes]:
