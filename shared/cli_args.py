@@ -137,6 +137,28 @@ def add_support(parser: argparse.ArgumentParser) -> None:
                         metavar="MU", help="object–table friction coefficient (default 0.5)")
 
 
+ENGINES = ("pybullet", "mujoco")  # shared/specs/sim.py's EngineName, without importing it
+
+
+def engine_list(text: str) -> tuple[str, ...]:
+    """An argparse type: comma-separated physics engines, each known and named once."""
+    names = tuple(e.strip() for e in text.split(",") if e.strip())
+    unknown = [e for e in names if e not in ENGINES]
+    if not names or unknown or len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a list of distinct engines ({', '.join(ENGINES)})")
+    return names
+
+
+def add_draw_engines(parser: argparse.ArgumentParser) -> None:
+    """The engines each P(success) draw is simulated in (the spec's uncertainty engines)."""
+    parser.add_argument(
+        "--draw-engines", type=engine_list, metavar="ENGINES",
+        help="physics engines each P(success) draw is simulated in, comma-separated "
+        "(default: the exploration's engine); pybullet,mujoco: a draw succeeds only where it "
+        "holds in both")
+
+
 def add_procs(parser: argparse.ArgumentParser, help_text: str = "worker processes "
               "(default: cores)", *, low: int = 1) -> None:
     parser.add_argument("--procs", type=bounded("processes", low, 4096, integer=True),

@@ -55,8 +55,10 @@ def _submit(args: argparse.Namespace) -> int:
             "dr": _given(args.dr, DEFAULT_R[2]), "attitudes": {"rolls": _given(args.rolls, 1)}}
     spec: dict = {"grid": grid, "refinement": {"levels": _given(args.levels, DEFAULT_LEVELS)},
                   "label": args.label or f"graspscape submit {args.object}"}
-    if args.uncertainty is not None:
-        spec["uncertainty"] = {"preset": args.uncertainty}
+    # as explore's spec: the preset, with the draws' engines beside it where given
+    uncertainty = {"preset": args.uncertainty, "engines": args.draw_engines}
+    if any(v is not None for v in uncertainty.values()):
+        spec["uncertainty"] = {k: v for k, v in uncertainty.items() if v is not None}
     props = {"mass_kg": args.mass, "friction": args.friction, "scale": args.scale,
              "units": args.units}
     with _client(args) as api:
@@ -133,6 +135,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     submit.add_argument(
         "--uncertainty", choices=["none", "lab", "field"],
         help="the errors P(success) is stated and certified under (default lab, as explore's)")
+    cli_args.add_draw_engines(submit)
     submit.add_argument("--label", help="free text shown with the exploration")
     submit.add_argument("--wait", action="store_true",
                         help="wait until it finishes, with progress; exit status as explore's")

@@ -54,8 +54,7 @@ def _explore(args: argparse.Namespace) -> int:
         "uncertainty": args.uncertainty,
         "support": args.support,
         "support_friction": args.support_friction,
-        "draw_engines": None if args.draw_engines is None else tuple(
-            e.strip() for e in args.draw_engines.split(",") if e.strip()),
+        "draw_engines": args.draw_engines,
     }
     return run_explore(ExploreOptions(**{k: v for k, v in options.items() if v is not None}))
 
@@ -87,10 +86,7 @@ def _register_explore(subparsers: argparse._SubParsersAction) -> None:
         "--uncertainty", choices=["none", "lab", "field"],
         help="the errors P(success) is stated and certified under: lab (default; 2 mm / 2° "
         "start pose error), field (5 mm / 5°, friction ×0.5–1, mass ×0.8–1.2) or none")
-    explore.add_argument(
-        "--draw-engines", metavar="ENGINES",
-        help="physics engines each P(success) draw is simulated in, comma-separated "
-        "(default pybullet); pybullet,mujoco: a draw succeeds only where it holds in both")
+    cli_args.add_draw_engines(explore)
     explore.add_argument("--quiet", action="store_true", help="no progress bar")
     explore.add_argument("--new", action="store_true",
                          help="explore again even where this very exploration is done (by "

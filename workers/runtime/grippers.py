@@ -2,17 +2,13 @@
 
 A lease names its gripper by a GripperRef: a shipped gripper by name (loaded from this
 install), any other by the hash of its archive (shared/specs/gripper_archive.py). Archives are
-unpacked into <cache>/grippers/<sha256>/ as meshes are kept (workers/runtime/objects.py): a
-file lock makes one process fetch while the others wait, the hash of the bytes is checked
-before anything is written, and the folder appears whole or not at all (unpacked beside it,
-then renamed).
+unpacked into <cache>/grippers/<sha256>/ as meshes are kept (content_cache.py): one process
+fetches while the others wait, the hash of the bytes is checked before anything is written,
+and the folder appears whole or not at all (unpacked beside it, then renamed).
 """
 
 from __future__ import annotations
 
-import fcntl
-import hashlib
-import os
 import shutil
 from pathlib import Path
 
@@ -25,8 +21,8 @@ from graspscape.shared.specs.gripper_archive import (
     write_members,
 )
 from graspscape.shared.wire import keys
-from graspscape.shared.wire.codec import decode_as, decode_reply_error, encode
 from graspscape.shared.wire.messages import GripperData, GripperRef, GripperRequest
+from graspscape.workers.runtime.content_cache import fetch_reply, fill_once
 from graspscape.workers.runtime.objects import ObjectFetchError
 
 
@@ -56,50 +52,31 @@ class GripperCache:
     def _unpacked(self, content_hash: str) -> Path:
         folder = self.folder / content_hash
         done = folder / ".kind"  # written last: its presence means the folder is whole
-        if done.is_file():
-            return local_path(folder, done.read_text())  # type: ignore[arg-type]
-        with open(self.folder / f"{content_hash}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            if done.is_file():  # another process unpacked it while this one waited
-                return local_path(folder, done.read_text())  # type: ignore[arg-type]
-            try:
-                archive = self._fetch(content_hash).archive()
-            except ValueError as exc:  # not base64
-                raise GripperFetchError(f"gripper {content_hash}: {exc}",
-                                        transient=False) from exc
-            if hashlib.sha256(archive).hexdigest() != content_hash:
-                raise GripperFetchError(f"gripper {content_hash}: the archive fetched has "
-                                        "another hash", transient=False)
-            try:
-                files = unpack(archive)
-                kind = kind_of(files)
-            except GripperArchiveError as exc:
-                raise GripperFetchError(f"gripper {content_hash}: {exc}",
-                                        transient=False) from exc
-            tmp = self.folder / f"{content_hash}.tmp{os.getpid()}"
-            shutil.rmtree(tmp, ignore_errors=True)
-            write_members(files, tmp)
-            (tmp / ".kind").write_text(kind)
-            shutil.rmtree(folder, ignore_errors=True)  # a half folder of a crashed process
-            os.replace(tmp, folder)  # atomic: readers see the whole folder or none
+        if fill_once(folder, content_hash, whole=done.is_file,
+                     fetch=lambda: self._archive(content_hash),
+                     write=lambda archive, tmp: self._unpack(content_hash, archive, tmp),
+                     error=GripperFetchError, what=f"gripper {content_hash}"):
             self.fetched += 1
-        return local_path(folder, kind)
+        return local_path(folder, done.read_text())  # type: ignore[arg-type]
 
-    def _fetch(self, content_hash: str) -> GripperData:
-        request = GripperRequest(content_hash=content_hash)
-        for reply in self.session.get(
-            keys.gripper_key(content_hash),
-            payload=encode(request),
-            consolidation=zenoh.ConsolidationMode.NONE,
-            timeout=self.timeout_s,
-        ):
-            if reply.ok is not None:
-                message = decode_as(reply.ok.payload.to_bytes(), GripperData)
-            else:
-                message = decode_reply_error(reply.err.payload.to_bytes())
-            if isinstance(message, GripperData):
-                return message
-            raise GripperFetchError(f"gripper {content_hash}: {message.code}: "
-                                    f"{message.message}", transient=message.code.retryable)
-        raise GripperFetchError(f"gripper {content_hash}: no answer from the coordinator",
-                                transient=True)
+    @staticmethod
+    def _unpack(content_hash: str, archive: bytes, tmp: Path) -> None:
+        try:
+            files = unpack(archive)
+            kind = kind_of(files)
+        except GripperArchiveError as exc:
+            raise GripperFetchError(f"gripper {content_hash}: {exc}",
+                                    transient=False) from exc
+        shutil.rmtree(tmp, ignore_errors=True)
+        write_members(files, tmp)
+        (tmp / ".kind").write_text(kind)
+
+    def _archive(self, content_hash: str) -> bytes:
+        message = fetch_reply(self.session, keys.gripper_key(content_hash),
+                              GripperRequest(content_hash=content_hash), GripperData,
+                              timeout_s=self.timeout_s, error=GripperFetchError,
+                              what=f"gripper {content_hash}")
+        try:
+            return message.archive()
+        except ValueError as exc:  # not base64
+            raise GripperFetchError(f"gripper {content_hash}: {exc}", transient=False) from exc

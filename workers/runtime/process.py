@@ -265,7 +265,7 @@ class WorkerProcess:
         if self.config.instant:
             if self.config.instant_pose_s:
                 self.stop.wait(self.config.instant_pose_s)
-            return instant_result(pose)
+            return instant_result(pose, tile.sample)
         if tile.sample is not None:  # a success probability's draw: outcome only
             from graspscape.workers.sim.samples import tile_draw
 

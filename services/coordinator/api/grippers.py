@@ -13,7 +13,7 @@ from fastapi import APIRouter, File, Request, Response, UploadFile, status
 from graspscape.services.coordinator.api.deps import Mutating, SessionDep
 from graspscape.services.coordinator.api.finite import FiniteJSONRoute
 from graspscape.services.coordinator.api.responses import UNAUTHORIZED, error
-from graspscape.services.coordinator.errors import PayloadTooLarge
+from graspscape.services.coordinator.api.uploads import read_limited, refuse_large_body
 from graspscape.services.coordinator.objects import grippers
 from graspscape.shared.specs.gripper import STORED_PREFIX
 from graspscape.shared.specs.gripper_archive import MAX_ARCHIVE_BYTES
@@ -52,14 +52,8 @@ def create_gripper(
     file: Annotated[UploadFile, File(description="a gripper's .toml spec, or a .zip of a URDF "
                                      "gripper's folder (its gripper.toml at the top)")],
 ) -> Any:
-    length = request.headers.get("content-length")
-    if length and length.isdigit() and int(length) > MAX_ARCHIVE_BYTES + 64 * 1024:
-        raise PayloadTooLarge(f"request body is larger than the limit of {MAX_ARCHIVE_BYTES} "
-                              "bytes for a gripper")
-    data = file.file.read(MAX_ARCHIVE_BYTES + 1)
-    if len(data) > MAX_ARCHIVE_BYTES:
-        raise PayloadTooLarge(f"the gripper file is larger than the limit of "
-                              f"{MAX_ARCHIVE_BYTES} bytes")
+    refuse_large_body(request, MAX_ARCHIVE_BYTES)
+    data = read_limited(file, MAX_ARCHIVE_BYTES, "the gripper file")
     row, created = grippers.store_upload(session, filename=file.filename, data=data)
     if not created:
         response.status_code = status.HTTP_200_OK

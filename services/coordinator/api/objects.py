@@ -15,7 +15,8 @@ from graspscape.services.coordinator.api.finite import (
 )
 from graspscape.services.coordinator.api.pages import Page
 from graspscape.services.coordinator.api.responses import NOT_FOUND, UNAUTHORIZED, error
-from graspscape.services.coordinator.errors import InvalidInput, PayloadTooLarge
+from graspscape.services.coordinator.api.uploads import read_limited, refuse_large_body
+from graspscape.services.coordinator.errors import InvalidInput
 from graspscape.services.coordinator.objects import service
 from graspscape.services.coordinator.objects.schemas import ObjectOut
 
@@ -48,13 +49,6 @@ def _inertia(text: str | None) -> tuple[float, float, float] | None:
             loc=("body", "inertia_diag"),
         )
     return values  # type: ignore[return-value]
-
-
-def _read_limited(upload: UploadFile, limit: int) -> bytes:
-    data = upload.file.read(limit + 1)
-    if len(data) > limit:
-        raise PayloadTooLarge(f"mesh file is larger than the upload limit of {limit} bytes")
-    return data
 
 
 @router.post(
@@ -96,13 +90,7 @@ def create_object(
         Form(description="length unit of the mesh file (default m); multiplies scale"),
     ] = None,
 ) -> Any:
-    length = request.headers.get("content-length")
-    # Multipart overhead on top of the file is small; refuse clearly oversized bodies outright.
-    if length and length.isdigit() and int(length) > settings.api.max_upload_bytes + 64 * 1024:
-        raise PayloadTooLarge(
-            "request body is larger than the upload limit of "
-            f"{settings.api.max_upload_bytes} bytes"
-        )
+    refuse_large_body(request, settings.api.max_upload_bytes)
     props: dict[str, Any] = {
         k: v
         for k, v in {
@@ -123,7 +111,7 @@ def create_object(
     if file is not None and name:
         raise InvalidInput("give either a mesh file or a name, not both")
     if file is not None:
-        data = _read_limited(file, settings.api.max_upload_bytes)
+        data = read_limited(file, settings.api.max_upload_bytes, "mesh file")
         row, created = service.create_uploaded(
             session, filename=file.filename, data=data, properties=props
         )

@@ -32,6 +32,18 @@ def test_submit_status_best_export(live_url, sessions, tmp_path, capsys) -> None
     assert len(trimesh.load(named, force="mesh").faces) > 0
 
 
+def test_submit_states_the_draws_engines(live_url, capsys) -> None:
+    """submit --draw-engines makes the spec explore's would: the engines in its uncertainty."""
+    grid = ["--dtheta", "40", "--r-min", "0", "--r-max", "0.01", "--levels", "0"]
+    assert main(["submit", "sphere", *grid, "--uncertainty", "field", "--draw-engines",
+                 "pybullet,mujoco", "--url", live_url]) == 0
+    eid = capsys.readouterr().out.strip()
+    assert main(["status", eid, "--json", "--url", live_url]) == 0
+    uncertainty = json.loads(capsys.readouterr().out)["spec"]["uncertainty"]
+    assert uncertainty["engines"] == ["pybullet", "mujoco"]
+    assert uncertainty["preset"] == "field" and uncertainty["position_mm"] == 5.0
+
+
 def test_submit_refusal_is_one_line(live_url, capsys) -> None:
     assert main(["submit", "no-such-object", "--url", live_url]) == 1
     err = capsys.readouterr().err.strip()

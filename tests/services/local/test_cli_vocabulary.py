@@ -95,3 +95,28 @@ def test_earlier_spellings_still_parse() -> None:
     args = parser.parse_args(["eval-pose", "--theta", "90", "--phi", "45"])
     resolve_object(parser, args)
     assert (args.object, args.theta, args.phi) == ("sphere", 90.0, 45.0)
+
+
+def test_draw_engines_one_flag_wherever_a_spec_is_made() -> None:
+    """explore and submit both make an exploration spec: the same --draw-engines, parsed to
+    the spec's engine names, which are the engines the flag knows."""
+    import typing
+
+    from graspscape.shared.cli_args import ENGINES
+    from graspscape.shared.specs.sim import EngineName
+
+    assert typing.get_args(EngineName) == ENGINES
+    parser = build_parser()
+    for command in ("explore", "submit"):
+        args = parser.parse_args([command, "mug", "--draw-engines", " pybullet, mujoco"])
+        assert args.draw_engines == ("pybullet", "mujoco")
+        assert parser.parse_args([command, "mug"]).draw_engines is None
+
+
+@pytest.mark.parametrize("engines", ["bullet", "pybullet,pybullet", ","])
+def test_bad_draw_engines_are_one_line(engines: str, capsys) -> None:
+    with pytest.raises(SystemExit) as exited:
+        main(["submit", "mug", "--draw-engines", engines])
+    assert exited.value.code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "argument --draw-engines" in last and "pybullet, mujoco" in last, last

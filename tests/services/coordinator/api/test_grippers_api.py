@@ -96,4 +96,8 @@ def test_an_oversized_upload_is_refused(client: TestClient, sessions: sessionmak
     monkeypatch.setattr(route, "MAX_ARCHIVE_BYTES", 1000)
     answer = client.post("/grippers", files={"file": ("big.toml", b"#" * 70_000)})
     assert answer.status_code == 413 and "1000 bytes" in answer.text
+    # within the body's slack: refused as the file is read, in the words POST /objects uses
+    answer = client.post("/grippers", files={"file": ("big.toml", b"#" * 1001)})
+    assert answer.status_code == 413
+    assert "the gripper file is larger than the upload limit of 1000 bytes" in answer.text
     assert _count(sessions) == 0
