@@ -19,16 +19,12 @@ from graspscape.shared import cli_args
 
 def _explore(args: argparse.Namespace) -> int:
     from graspscape.services.local.explore import ExploreOptions, run_explore
-    from graspscape.shared.specs.gripper import MjcfGripperSpec, load_gripper
+    from graspscape.shared.specs.gripper import engine_problem
 
     # An MJCF gripper loads in MuJoCo only: refused here, not pose by pose in the workers.
-    try:
-        mjcf = isinstance(load_gripper(args.gripper or "robotiq_3f"), MjcfGripperSpec)
-    except ValueError:
-        mjcf = False  # an unknown gripper: run_explore says so
-    if args.engine != "mujoco" and mjcf:
-        print(f"graspscape explore: error: gripper {args.gripper} is described by an MJCF, "
-              "which only the MuJoCo engine loads: add --engine mujoco", file=sys.stderr)
+    problem = engine_problem(args.gripper or "robotiq_3f", {args.engine or "pybullet"})
+    if problem is not None:
+        print(f"graspscape explore: error: {problem} (--engine mujoco)", file=sys.stderr)
         return 2
 
     options = {

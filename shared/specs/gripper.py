@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import re
 import tomllib
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Literal
 
@@ -286,36 +287,6 @@ STORED_PREFIX = "sha256:"
 STORED_GRIPPER = re.compile(r"^sha256:[0-9a-f]{64}$")
 
 
-class GripperFileError(ValueError):
-    """A gripper's files cannot be used as they are; the message says why and what to do."""
-
-
-def resolve_inside(folder: Path, filename: str, relative_to: Path | None = None, *,
-                   must_exist: bool = True) -> Path:
-    """The file a URDF names, which must lie inside the gripper's folder. `package://PKG/a/b`
-    is looked up as `a/b` and as `PKG/a/b` under the folder, a plain name relative to
-    `relative_to` (the URDF's folder); absolute paths, `..` out of the folder and links
-    pointing out of it are refused. `must_exist=False`: only that rule, for a mesh of a link
-    that may be dropped (an arm's, above the hand's base link)."""
-    root = folder.resolve()
-    start = root
-    if filename.startswith("package://"):
-        rest = filename.removeprefix("package://")
-        candidates = [rest.split("/", 1)[1], rest] if "/" in rest else [rest]
-    else:
-        candidates = [filename.removeprefix("file://")]
-        start = (relative_to or root).resolve()
-    for name in candidates:
-        path = (start / name).resolve()
-        if os.path.isabs(name) or not path.is_relative_to(root):
-            raise GripperFileError(
-                f"mesh {filename!r} lies outside the gripper's folder {root}: copy the file "
-                "into the folder and name it relative to it (package:// maps to the folder)")
-        if path.is_file() or not must_exist:
-            return path
-    raise GripperFileError(f"mesh {filename!r} is not in the gripper's folder {root}")
-
-
 def is_shipped(found: Path) -> bool:
     """Whether a found gripper file or folder is one of the shipped ones (every worker has
     those; any other is shipped to workers by the coordinator)."""
@@ -403,3 +374,20 @@ def list_grippers() -> list[str]:
         names.update(p.stem for p in directory.glob("*.toml"))
         names.update(p.parent.name for p in directory.glob(f"*/{URDF_DESCRIPTION}"))
     return sorted(names)
+
+
+def engine_problem(name_or_path: str, engines: Iterable[str]) -> str | None:
+    """Why the gripper cannot be simulated in every one of `engines` (an MJCF description
+    loads in MuJoCo only), or None; a gripper that does not load is left to the check that
+    names it."""
+    others = sorted(set(engines) - {"mujoco"})
+    if not others:
+        return None
+    try:
+        spec = load_gripper(name_or_path)
+    except (ValueError, OSError, tomllib.TOMLDecodeError):
+        return None
+    if isinstance(spec, MjcfGripperSpec):
+        return (f"gripper {name_or_path} is described by an MJCF, which only the MuJoCo engine "
+                f"loads (asked for: {', '.join(others)}): use the engine mujoco")
+    return None

@@ -24,14 +24,13 @@ from typing import Literal
 
 from graspscape.shared.specs.gripper import (
     URDF_DESCRIPTION,
-    GripperFileError,
     GripperSpec,
     MjcfGripperSpec,
     find_gripper,
     load_urdf_gripper,
-    resolve_inside,
     unknown_gripper_message,
 )
+from graspscape.shared.specs.gripper_files import GripperFileError, resolve_inside
 from pydantic import ValidationError
 
 GripperKind = Literal["toml", "urdf"]

@@ -9,7 +9,8 @@ import zipfile
 
 import pytest
 from graspscape.shared.specs import gripper_archive as ga
-from graspscape.shared.specs.gripper import CONFIG_DIR, GripperFileError, find_gripper, load_gripper
+from graspscape.shared.specs.gripper import CONFIG_DIR, find_gripper, load_gripper
+from graspscape.shared.specs.gripper_files import GripperFileError
 
 
 def _zip(members: dict[str, bytes]) -> bytes:

@@ -159,3 +159,19 @@ def test_the_arm_drive_holds_a_turned_hand_still(small_sphere, sim_cache: Path,
     assert float(abs(data.qvel[evaluator.world.palm_dofs]).max()) < 1e-3
     assert float(abs(position - target).max()) < 1e-4
     assert Rotation.from_matrix(now @ rotation.T).magnitude() < 1e-3
+
+
+def test_a_spec_naming_an_mjcf_gripper_in_pybullet_is_refused_at_submit() -> None:
+    """The REST path: the spec itself is refused, for the exploration's engine and for the
+    engines its P(success) draws run in; in MuJoCo alone it is taken."""
+    from graspscape.shared.specs.exploration import ExplorationSpec
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="only the MuJoCo engine"):
+        ExplorationSpec(object_id=1, gripper="menagerie_franka_hand")
+    mujoco = {"engine": "mujoco"}
+    with pytest.raises(ValidationError, match="asked for: pybullet"):
+        ExplorationSpec(object_id=1, gripper="menagerie_franka_hand", settings=mujoco,
+                        uncertainty={"preset": "lab", "engines": ["mujoco", "pybullet"]})
+    spec = ExplorationSpec(object_id=1, gripper="menagerie_franka_hand", settings=mujoco)
+    assert spec.settings.engine == "mujoco"

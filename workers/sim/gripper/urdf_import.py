@@ -27,10 +27,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 from graspscape.shared.specs.gripper import (
-    GripperFileError,
     UrdfGripperSpec,
-    resolve_inside,
 )
+from graspscape.shared.specs.gripper_files import GripperFileError, resolve_inside
 from graspscape.workers.sim.objects.decompose import params_key, vhacd_parts
 from graspscape.workers.sim.objects.meshio import atomic_write, write_parts_obj
 from scipy.spatial.transform import Rotation

@@ -45,8 +45,9 @@ from graspscape.services.coordinator.exploration.strategies.replay_cache import 
 )
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
 from graspscape.services.coordinator.store.models import PoseRow
-from graspscape.shared.specs.exploration import CmaesStrategySpec, ExplorationSpec
+from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.strategies import CmaesStrategySpec
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 

@@ -52,8 +52,9 @@ from graspscape.services.coordinator.exploration.strategies.replay_cache import 
 )
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
 from graspscape.services.coordinator.store.models import PoseRow
-from graspscape.shared.specs.exploration import ExplorationSpec, PpoStrategySpec
+from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.strategies import PpoStrategySpec
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 

@@ -19,8 +19,9 @@ import random
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Planned, Stage
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
 from graspscape.services.coordinator.store.models import TileRow
-from graspscape.shared.specs.exploration import ExplorationSpec, RandomStrategySpec
+from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
+from graspscape.shared.specs.strategies import RandomStrategySpec
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
