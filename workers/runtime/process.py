@@ -32,13 +32,13 @@ from graspscape.shared.wire.messages import (
     ResultBatch,
     TileLease,
 )
-from graspscape.shared.wire.session import zenoh_config
 from graspscape.workers.runtime.backoff import Backoff
 from graspscape.workers.runtime.config import WorkerConfig
 from graspscape.workers.runtime.grippers import GripperCache
 from graspscape.workers.runtime.instant import instant_result
 from graspscape.workers.runtime.isolation import ErrorStreak, error_result, finite_or_error
 from graspscape.workers.runtime.objects import ObjectCache, ObjectFetchError
+from graspscape.workers.runtime.session import session_config
 from graspscape.workers.runtime.watch import CoordinatorWatch, stop_with_parent
 
 log = logging.getLogger("graspscape.worker")
@@ -373,23 +373,6 @@ class _Delivery:
     replies: Any  # zenoh's reply handler; None when the query could not be sent
     tile: TileLease | None = None  # a final batch's lease, to complete it (_complete)
     round: int = 0  # 1: the batch that completes a tile the coordinator found incomplete
-
-
-def session_config(config: WorkerConfig) -> zenoh.Config:
-    """A worker process's zenoh session: a client of the coordinator or router, logging in
-    where the config has a password. Bounded connect timeout: the process stays responsive
-    to SIGTERM while the coordinator is not up yet. Once open, zenoh reconnects by itself.
-
-    zenoh's shared-memory transport is off: each session that uses it (on by default since
-    1.x, for messages over 3 KB between processes of one host) maps a 16 MiB pool file in
-    /dev/shm that a killed process never removes and that was left behind after clean exits
-    too (the soak, tests/faults/soak.py: 90 MB after 3 kills of 400 tiles). A worker's
-    batches are tens of kB, so copying them costs nothing next to their ingest, and remote
-    workers never share memory with the coordinator anyway."""
-    zenoh_cfg = zenoh_config(mode="client", connect=config.connect, connect_timeout_ms=2000,
-                             exit_on_failure=True, **config.zenoh_login())
-    zenoh_cfg.insert_json5("transport/shared_memory/enabled", "false")
-    return zenoh_cfg
 
 
 def _default_cache_dir() -> Path:

@@ -55,8 +55,9 @@ from graspscape.workers.sim.render import render_grasp
 from graspscape.workers.sim.robustness import SynthesizedGrasp, capture_grasp, run_tests
 from graspscape.workers.sim.scene import Scene
 from graspscape.workers.sim.sensitivity import ProbeContext, probe_instant
+from graspscape.workers.sim.slip import slip_check
 from graspscape.workers.sim.start_pose import StartPose, place_hand, start_pose
-from graspscape.workers.sim.trajectory import ReferencePath, rotation_angle
+from graspscape.workers.sim.trajectory import ReferencePath
 
 FIXTURE_MAX_FORCE_N = 5000.0
 
@@ -329,22 +330,6 @@ class Evaluator:
         result["outcome"] = outcome
         result["eval_time_s"] = time.perf_counter() - started
         return PoseResult(**result)
-
-
-def slip_check(scene, spec, rel_pos0: np.ndarray, rel_rot0: np.ndarray):
-    """A function telling whether the object has slipped in the hand: moved more than the
-    spec's slip distance or turned more than its slip angle from where it rested at the start
-    (rel_pos0, rel_rot0: its pose in the hand's frame then). Either engine's scene."""
-    hand = scene.hand
-
-    def slipped() -> bool:
-        pos, rot = hand.frame_pose()
-        o_pos, o_rot = scene.object_pose()
-        moved = np.linalg.norm(rot.T @ (o_pos - pos) - rel_pos0)
-        turned = rotation_angle((rot.T @ o_rot) @ rel_rot0.T)
-        return moved > spec.slip_distance_m or turned > spec.slip_angle_rad
-
-    return slipped
 
 
 def default_cache_dir() -> Path:

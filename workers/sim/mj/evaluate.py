@@ -26,7 +26,6 @@ from graspscape.shared.specs.pose import Pose
 from graspscape.shared.specs.results import Outcome, PhaseTimes, PoseResult, RobustnessReport
 from graspscape.shared.specs.robustness import RobustnessSettings
 from graspscape.shared.specs.sim import SimSettings
-from graspscape.workers.sim.evaluate import slip_check
 from graspscape.workers.sim.grasp_record import grasp_fields
 from graspscape.workers.sim.metric import mu_s
 from graspscape.workers.sim.mj.hand import MjHand
@@ -36,6 +35,7 @@ from graspscape.workers.sim.mj.robustness import MjGrasp, capture, run_tests
 from graspscape.workers.sim.mj.scene import MjScene
 from graspscape.workers.sim.objects import PreparedObject
 from graspscape.workers.sim.policies import get_policy
+from graspscape.workers.sim.slip import slip_check
 from graspscape.workers.sim.start_pose import StartPose, start_pose
 from graspscape.workers.sim.trajectory import ReferencePath
 

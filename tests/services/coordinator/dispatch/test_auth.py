@@ -17,7 +17,8 @@ from graspscape.services.coordinator.settings import Settings, ZenohSettings
 from graspscape.shared.wire.messages import TileLease
 from graspscape.shared.wire.session import is_local_endpoint, write_users_file
 from graspscape.workers.runtime.config import WorkerConfig
-from graspscape.workers.runtime.process import Stopped, WorkerProcess, session_config
+from graspscape.workers.runtime.process import Stopped, WorkerProcess
+from graspscape.workers.runtime.session import session_config
 from prometheus_client import CollectorRegistry
 from sqlalchemy.orm import Session, sessionmaker
 

@@ -34,7 +34,7 @@ from graspscape.services.coordinator.manifolds.robust import (
 from graspscape.services.coordinator.mapspace import success
 from graspscape.services.coordinator.objects.service import create_named
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow
-from graspscape.services.local.explore import robust_lines
+from graspscape.services.local.explore_lines import robust_lines
 from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import (
     CertificationSpec,
