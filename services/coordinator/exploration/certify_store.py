@@ -192,8 +192,16 @@ def _candidates(session: Session, exploration_id: int, spec: ExplorationSpec,
                 samples: Mapping[Point, StoredPose], members: Sequence[Point],
                 scores: Mapping[Point, RobustScore], radius: Callable[[Point], float]
                 ) -> list[racing.Candidate]:
-    """A manifold's race candidates with their stored draws' estimates."""
+    """A manifold's race candidates with their stored draws' estimates: the best members by
+    the robust order, and every member drawn for already. The map can change after a round
+    (refinement, local search): a candidate it no longer ranks first keeps its draws in the
+    race and in the answer, as /best's ranking keeps them."""
     points = racing.candidates(members, samples, scores, max(1, spec.certification.candidates))
+    drawn = set(session.scalars(select(PoseRow.certifies).where(
+        PoseRow.exploration_id == exploration_id, PoseRow.certifies.is_not(None)).distinct()))
+    chosen = set(points)
+    points += [p for p in members
+               if samples[p].key in drawn and samples[p].viable and p not in chosen]
     seqs = {p: racing.draw_poses(samples[p], spec.uncertainty, radius(p),
                                  racing.success.LOOKS[-1]) for p in points}
     stored = stored_by_key(session, exploration_id, [q.key() for s in seqs.values() for q in s])
