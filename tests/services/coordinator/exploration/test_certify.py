@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from graspscape.services.coordinator.exploration import certify
+from graspscape.services.coordinator.exploration import certify, racing
 from graspscape.services.coordinator.exploration.accounting import exploration_budget
 from graspscape.services.coordinator.exploration.certify_store import (
     certification_plans,
@@ -314,7 +314,7 @@ def test_a_lone_held_pose_is_never_certified(sqlite_sessions) -> None:
 
 @pytest.mark.slow  # two whole explorations per database
 def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
-        client, sessions) -> None:
+        client, sessions, monkeypatch) -> None:
     object_id = _sphere(sessions)
     # No local search: certification follows refinement, which leaves the inside alone.
     eid = _explore(sessions, object_id, _cap, search_rounds=0)
@@ -350,6 +350,18 @@ def test_a_pose_inside_a_large_held_region_is_certified_and_the_plan_repeats(
     # Same spec, other worker count and report order: the same certification plan.
     again = _explore(sessions, object_id, _cap, workers=3, seed=7, search_rounds=0)
     assert _plan_of(sessions, again) == plan
+    # A pick the map no longer ranks first (a later round can change the robust order) keeps
+    # its draws: drawn members stay candidates. Here the order puts every other member first.
+    real = racing.candidates
+
+    def others_first(members, samples, scores, count):  # type: ignore[no-untyped-def]
+        ranked = real(members, samples, scores, len(members))
+        return [p for p in ranked if samples[p].key != best.key][:count]
+
+    monkeypatch.setattr(racing, "candidates", others_first)
+    with sessions() as s:
+        (moved,) = certified_bests(s, eid)
+    assert moved.key == best.key and moved.jitters == success.LOOKS[2] and moved.certified
 
 
 def test_a_race_s_look_is_planned_whole_or_not_at_all() -> None:
