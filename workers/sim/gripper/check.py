@@ -270,19 +270,26 @@ def _trials(spec: AnyGripperSpec, cache: Path, out_dir: Path | None) -> list[Tri
     return trials
 
 
-def check_gripper(spec: AnyGripperSpec, cache: Path, out_dir: Path | None = None
-                  ) -> CheckReport:
-    found = _free_air(spec, cache, out_dir)
-    trials = _trials(spec, cache, out_dir)
+def check_problems(found: dict, trials: list[Trial], declared_reach: float) -> list[str]:
+    """The check's problems, in either engine: the free-air findings, a declared reach off
+    the measured one, and a hand that held the sphere from no start (with why)."""
     problems = list(found["problems"])
-    declared = spec.reach()
-    if abs(found["reach"] - declared) > REACH_TOLERANCE_M:
-        problems.append(f"declared reach {declared * 1000:.0f} mm, measured "
+    if abs(found["reach"] - declared_reach) > REACH_TOLERANCE_M:
+        problems.append(f"declared reach {declared_reach * 1000:.0f} mm, measured "
                         f"{found['reach'] * 1000:.0f} mm: set reach_m = {found['reach']:.3f}")
     if not any(t.viable for t in trials if t.object == "sphere"):
         why = why_no_hold("sphere", trials, found["travel"], found["digits"])
         problems.append("held the sphere from none of the start poses tried"
                         + (": " + "; ".join(why) if why else ""))
+    return problems
+
+
+def check_gripper(spec: AnyGripperSpec, cache: Path, out_dir: Path | None = None
+                  ) -> CheckReport:
+    found = _free_air(spec, cache, out_dir)
+    trials = _trials(spec, cache, out_dir)
+    declared = spec.reach()
+    problems = check_problems(found, trials, declared)
     if out_dir:
         found["pictures"] += [str(p_) for p_ in sorted(out_dir.glob("sphere_*.png"))
                               + sorted(out_dir.glob("cube_*.png"))]

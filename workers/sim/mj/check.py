@@ -24,14 +24,14 @@ from graspscape.workers.sim.gripper.check import (
     FREE_CLOSING_CAP_S,
     LIMIT_SLACK,
     MOVED_AT_LEAST,
-    REACH_TOLERANCE_M,
     STALL_TOLERANCE,
     TRY_POSES,
     CheckReport,
     JointTravel,
     Trial,
+    check_problems,
 )
-from graspscape.workers.sim.gripper.check_explain import why_no_hold, zero_quality_warnings
+from graspscape.workers.sim.gripper.check_explain import zero_quality_warnings
 from graspscape.workers.sim.mj.evaluate import MjEvaluator
 from graspscape.workers.sim.objects import prepare_object
 
@@ -151,15 +151,8 @@ def _trials(spec: AnyGripperSpec, cache: Path) -> list[Trial]:
 def check_gripper_mujoco(spec: AnyGripperSpec, cache: Path) -> CheckReport:
     found = _free_air(spec, cache)
     trials = _trials(spec, cache)
-    problems = list(found["problems"])
     declared = spec.reach()
-    if abs(found["reach"] - declared) > REACH_TOLERANCE_M:
-        problems.append(f"declared reach {declared * 1000:.0f} mm, measured "
-                        f"{found['reach'] * 1000:.0f} mm: set reach_m = {found['reach']:.3f}")
-    if not any(t.viable for t in trials if t.object == "sphere"):
-        why = why_no_hold("sphere", trials, found["travel"], found["digits"])
-        problems.append("held the sphere from none of the start poses tried"
-                        + (": " + "; ".join(why) if why else ""))
+    problems = check_problems(found, trials, declared)
     kind = ("toml" if isinstance(spec, GripperSpec)
             else "mjcf" if isinstance(spec, MjcfGripperSpec) else "urdf")
     return CheckReport(
