@@ -59,7 +59,16 @@ def stable_poses(mesh: trimesh.Trimesh) -> list[tuple[np.ndarray, float]]:
         merged.append((transform, float(sum(probabilities[i] for i in group))))
     total = sum(p for _, p in merged) or 1.0
     merged = [(t, p / total) for t, p in merged]
-    return sorted(merged, key=lambda tp: -tp[1])
+    return sorted(merged, key=_likelihood_then_upright)
+
+
+def _likelihood_then_upright(pose: tuple[np.ndarray, float]) -> tuple[float, ...]:
+    """Most probable first; equally probable poses (a cube's six faces) in an order of their
+    own, not trimesh's facet order, which differs between its releases: the object's own +z
+    nearest to up first, then +y, then +x."""
+    transform, probability = pose
+    up = transform[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    return (-round(probability, 6), *(-round(float(up[i]), 6) for i in (2, 1, 0)))
 
 
 def chosen_resting_poses(mesh: trimesh.Trimesh, *, min_probability: float,

@@ -93,6 +93,10 @@ def test_resting_poses_of_the_cube_and_the_sphere():
     assert len(cube) == 6
     assert all(abs(r.probability - 1 / 6) < 1e-3 for r in cube)
     assert all(abs(r.position[2] - 0.03) < 1e-6 for r in cube)
+    # Equally likely faces in the module's own order (+z, +y, +x up first), whatever order
+    # trimesh lists its facets in.
+    ups = [tuple(round(float(v), 6) + 0.0 for v in r.up()) for r in cube]
+    assert ups == [(0, 0, 1), (0, 1, 0), (1, 0, 0), (-1, 0, 0), (0, -1, 0), (0, 0, -1)]
     # A polyhedral sphere rests on any of its 1,280 facets: one resting pose, merged.
     sphere = chosen_resting_poses(trimesh.creation.icosphere(subdivisions=3, radius=0.04),
                                   min_probability=0.05, max_poses=4)
