@@ -4,7 +4,8 @@ Its status, its counters (tiles_total, poses_total, poses_done, viable_count), i
 (started_at, finished_at, updated_at), its group (support_group), the manifold table's mark
 (manifolds_poses_done, manifolds_final), its creation and its deletion. Nothing else in the
 coordinator writes the row (tests/services/coordinator/store/test_exploration_state_owner.py
-reads the source to keep it so); reads stay where they are needed.
+reads the source to keep it so); reads stay where they are needed. A new write of the row (a
+new column, a lease on it) is one more named function here, beside these.
 
 Status transitions (`TRANSITIONS`):
 
@@ -26,7 +27,7 @@ Commits: each function is one statement (or one change of a loaded row) in the c
 transaction and never commits; the caller that owns the unit of work commits:
 
 - exploration/service.py: `create` and `group` (create_explorations, one commit for a group),
-  `cancel` (cancel_exploration), `delete` (delete_exploration);
+  `cancel` (cancel_exploration), `delete_row` (delete_exploration);
 - store/queue.py: `start` (lease_tiles), `finish_complete` (fail_tile, requeue_where),
   `reopen` (retry_failed_tiles);
 - exploration/scheduler.py, after the strategy reacted to the batch in the same transaction:
