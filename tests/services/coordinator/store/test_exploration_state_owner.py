@@ -16,7 +16,14 @@ import ast
 import re
 from pathlib import Path
 
-from graspscape.services.coordinator.store.models import ExplorationRow
+import pytest
+from graspscape.services.coordinator.errors import Conflict
+from graspscape.services.coordinator.store.explorations import TRANSITIONS, check_transition
+from graspscape.services.coordinator.store.models import (
+    FINISHED_STATUSES,
+    ExplorationRow,
+    ExplorationStatus,
+)
 
 ROOT = Path(__file__).resolve().parents[4]
 SERVICES = ROOT / "services"
@@ -119,3 +126,16 @@ def test_the_reader_sees_each_kind_of_write_and_lets_reads_be() -> None:
         "    return 'SELECT * FROM explorations'\n"
     )
     assert writes(reads) == []
+
+
+def test_the_status_moves_refused_are_those_no_caller_makes() -> None:
+    assert set(TRANSITIONS) == set(ExplorationStatus)
+    assert TRANSITIONS[ExplorationStatus.CANCELLED] == frozenset()
+    for finished in FINISHED_STATUSES:
+        with pytest.raises(Conflict, match=f"exploration 7 cannot go from {finished.value} to"):
+            check_transition(7, finished.value, ExplorationStatus.CANCELLED)
+    with pytest.raises(Conflict):
+        check_transition(7, "cancelled", ExplorationStatus.RUNNING)
+    for status in (ExplorationStatus.QUEUED, ExplorationStatus.RUNNING,
+                   ExplorationStatus.DONE, ExplorationStatus.INCOMPLETE, ExplorationStatus.FAILED):
+        check_transition(7, status.value, ExplorationStatus.RUNNING)  # reopened or started
