@@ -15,12 +15,10 @@ from typing import Any
 from graspscape.services.coordinator.exploration import symmetry
 from graspscape.services.coordinator.exploration.strategies.base import Planned
 from graspscape.services.coordinator.exploration.tiling import group_tiles
-from graspscape.services.coordinator.store import tiles
+from graspscape.services.coordinator.store import explorations, tiles
 from graspscape.services.coordinator.store.dialect import insert_for
 from graspscape.services.coordinator.store.models import (
     POSE_METRIC_COLUMNS,
-    ExplorationRow,
-    ExplorationStatus,
     PosePlanRow,
     PoseRow,
     TileRow,
@@ -28,7 +26,7 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.shared.specs.pose import Pose, tile_poses
 from graspscape.shared.specs.results import DrawScales
 from graspscape.shared.wire.messages import TileSample
-from sqlalchemy import func, select, update
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 
@@ -87,18 +85,8 @@ def enqueue(session: Session, exploration_id: int, planned: Sequence[Planned], n
         added += tiles.add_tiles(
             session, exploration_id=exploration_id, round=round_, level=level, now=now,
             tiles=grouped)
-    session.execute(
-        update(ExplorationRow)
-        .where(ExplorationRow.id == exploration_id)
-        .values(
-            tiles_total=ExplorationRow.tiles_total + added,
-            poses_total=ExplorationRow.poses_total + sum(1 for item in planned if item.counted),
-            status=ExplorationStatus.RUNNING,
-            finished_at=None,
-            updated_at=now,
-        )
-        .execution_options(synchronize_session=False)
-    )
+    explorations.count_planned(session, exploration_id, tiles_added=added,
+                               poses_counted=sum(1 for item in planned if item.counted), now=now)
     return added
 
 
@@ -157,13 +145,6 @@ def store_inferred(session: Session, exploration_id: int,
     returned = dict(session.connection().execute(stmt, rows).all())
     if returned:
         counted = sum(1 for pose, _, _, c in copies if c and pose.key() in returned)
-        session.execute(
-            update(ExplorationRow)
-            .where(ExplorationRow.id == exploration_id)
-            .values(poses_done=ExplorationRow.poses_done + len(returned),
-                    poses_total=ExplorationRow.poses_total + counted,
-                    viable_count=ExplorationRow.viable_count
-                    + sum(1 for v in returned.values() if v))
-            .execution_options(synchronize_session=False)
-        )
+        explorations.count_copies(session, exploration_id, stored=len(returned), counted=counted,
+                                  viable=sum(1 for v in returned.values() if v))
     return rows

@@ -18,7 +18,7 @@ from graspscape.services.coordinator.exploration.schemas import (
 from graspscape.services.coordinator.exploration.support import resting_specs
 from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.objects.grippers import gripper_hash_for
-from graspscape.services.coordinator.store import queue, tiles
+from graspscape.services.coordinator.store import explorations, queue, tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -60,8 +60,7 @@ def create_explorations(
     specs = resting_specs(session, spec)
     rows = [_add_exploration(session, one, tile_target_poses, max_poses) for one in specs]
     if spec.support.kind == "plane":
-        for row in rows:
-            row.support_group = rows[0].id
+        explorations.group(rows)
     session.commit()
     return rows
 
@@ -79,22 +78,13 @@ def _add_exploration(session: Session, spec: ExplorationSpec, tile_target_poses:
         )
     now = utcnow()
     resting = spec.support.resting
-    row = ExplorationRow(
-        object_id=spec.object_id,
-        spec=spec.model_dump(mode="json"),
-        status=ExplorationStatus.QUEUED,
-        tiles_total=len(first_tiles),
-        poses_total=poses_total,
-        poses_done=0,
-        viable_count=0,
-        created_at=now,
-        updated_at=now,
+    row = explorations.create(
+        session, object_id=spec.object_id, spec=spec.model_dump(mode="json"),
+        tiles_total=len(first_tiles), poses_total=poses_total, now=now,
         resting_index=None if resting is None else resting.index,
         resting_probability=None if resting is None else resting.probability,
         gripper_hash=gripper_hash,
     )
-    session.add(row)
-    session.flush()
     tiles.add_tiles(session, exploration_id=row.id, level=0, tiles=first_tiles, now=now)
     return row
 
@@ -174,9 +164,7 @@ def cancel_exploration(session: Session, *, exploration_id: int) -> ExplorationR
         raise Conflict(f"exploration {exploration_id} is already {row.status}; nothing to cancel")
     now = utcnow()
     tiles.cancel_open(session, exploration_id=exploration_id, now=now)
-    row.status = ExplorationStatus.CANCELLED
-    row.finished_at = now
-    row.updated_at = now
+    explorations.cancel(row, now)
     session.commit()
     # The table of what was stored, final: the keeper's, as after a finishing batch.
     from graspscape.services.coordinator.manifolds.keeper import KEEPER
@@ -236,7 +224,7 @@ def delete_exploration(session: Session, *, exploration_id: int) -> None:
     created_at = session.get(ExplorationRow, exploration_id).created_at
     for model in (PoseRow, ManifoldRow, PosePlanRow, TileRow, MapPictureRow):
         session.execute(delete(model).where(model.exploration_id == exploration_id))
-    session.execute(delete(ExplorationRow).where(ExplorationRow.id == exploration_id))
+    explorations.delete_row(session, exploration_id)
     session.commit()
     # Its running map's file on disk too (after the commit: a failed delete keeps it).
     url = str(session.get_bind().url)

@@ -29,6 +29,7 @@ from graspscape.services.coordinator.manifolds.running import RunningMap
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
 from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 from graspscape.services.coordinator.mapspace.samples import _SAMPLE_COLUMNS, point_or_none
+from graspscape.services.coordinator.store import explorations
 from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow, PoseRow
 from graspscape.shared.specs.pose import Pose
 from sqlalchemy import bindparam, delete, select, update
@@ -241,9 +242,7 @@ def write(session: Session, exploration_id: int, state: MapState, *, final: bool
             .where(poses.c.exploration_id == exploration_id, poses.c.pose_key == bindparam("k"))
             .values(robust_s=bindparam("s"), robust_q=bindparam("q"),
                     robust_label=bindparam("l")), scores)
-    exploration.manifolds_poses_done = exploration.poses_done
-    exploration.manifolds_final = final
-    session.flush()
+    explorations.mark_table(session, exploration, final=final)
     state.rows_of = {main: (keep[main], m) for main, m in wanted.items()}
     state.mark = (exploration.poses_done, final)
     state.dirty, state.rescored = set(), set()

@@ -45,6 +45,7 @@ from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 from graspscape.services.coordinator.mapspace.samples import lattice_of
 from graspscape.services.coordinator.mapspace.specs import spec_of
 from graspscape.services.coordinator.objects.geometry import object_mesh
+from graspscape.services.coordinator.store import explorations
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
     ExplorationRow,
@@ -52,7 +53,7 @@ from graspscape.services.coordinator.store.models import (
     PoseRow,
 )
 from graspscape.shared.specs.exploration import ExplorationSpec
-from sqlalchemy import Text, bindparam, cast, select, update
+from sqlalchemy import Text, bindparam, cast, select
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
@@ -162,8 +163,7 @@ def refresh_manifolds(
     # The exploration's row first (PostgreSQL: its lock; SQLite: the write lock), then the
     # running map's: an ingest refreshing holds the row lock already, so the order is the
     # same everywhere and two refreshes of one exploration cannot deadlock.
-    session.execute(update(ExplorationRow).where(ExplorationRow.id == exploration_id)
-                    .values(manifolds_final=ExplorationRow.manifolds_final))
+    explorations.lock_for_table(session, exploration_id)
     row, state, fresh = _state(session, exploration_id)
     with state.lock:
         update_state(session, exploration_id, state, fresh)

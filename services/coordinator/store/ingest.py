@@ -26,7 +26,7 @@ from datetime import datetime
 from typing import Any, NamedTuple
 
 from graspscape.services.coordinator.errors import InvalidInput, NotFound, NotLeaseHolder
-from graspscape.services.coordinator.store import pipeline, tiles
+from graspscape.services.coordinator.store import explorations, pipeline, tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.dialect import is_postgres
 from graspscape.services.coordinator.store.models import ExplorationRow, PoseRow, TileRow, TileState
@@ -37,14 +37,10 @@ from graspscape.services.coordinator.store.pose_rows import (
     insert_new,
     pg_insert,
 )
-from graspscape.services.coordinator.store.queue import (
-    FINISH_EXPLORATIONS,  # its statement, for the pipeline
-    finish_complete_explorations,
-)
 from graspscape.shared.specs.pose import tile_pose_keys
 from graspscape.shared.specs.results import PoseResult
 from pydantic import BaseModel
-from sqlalchemy import Connection, bindparam, select, update
+from sqlalchemy import Connection, bindparam, select
 from sqlalchemy.orm import Session
 
 
@@ -83,20 +79,10 @@ _STORED = select(PoseRow.pose_key).where(
 )
 _KEY_CHUNK = 500
 _SHOWN_KEYS = 10
-# The exploration's counters; it returns the status and creation time the scheduler needs.
-_COUNT = (
-    update(ExplorationRow).where(ExplorationRow.id == bindparam("exploration_id"))
-    .values(poses_done=ExplorationRow.poses_done + bindparam("inserted"),
-            viable_count=ExplorationRow.viable_count + bindparam("viable"),
-            updated_at=bindparam("now"))
-    .returning(ExplorationRow.status, ExplorationRow.created_at)
-)
 _KEY_SHARE = (select(ExplorationRow.id).where(ExplorationRow.id == bindparam("exploration_id"))
               .with_for_update(read=True, key_share=True))
 # The same, for PostgreSQL pipelines (store/pipeline.py).
-_COUNT_PIPED = Piped(_COUNT, {"exploration_id": 0, "inserted": 0, "viable": 0, "now": None})
 _KEY_SHARE_PIPED = Piped(_KEY_SHARE, {"exploration_id": 0})
-_FINISH_EXPLORATIONS_PIPED = Piped(FINISH_EXPLORATIONS, {"ids": [0], "now": None})
 
 
 def _not_holder(tile: Any, tile_id: int, lease_epoch: int, worker_id: str) -> str | None:
@@ -268,15 +254,15 @@ def _count(session: Session, counted: dict[str, Any], *, finish: bool, commit: b
     connection = session.connection()
     eid, now = counted["exploration_id"], counted["now"]
     if (finish or commit) and is_postgres(session):
-        finishing = [_FINISH_EXPLORATIONS_PIPED.step(ids_1=eid, now=now)] if finish else []
-        count, *_ = pipeline.run(connection, [_COUNT_PIPED.step(**counted), *finishing],
-                                 commit=commit)
+        finishing = [explorations.finish_step(eid, now)] if finish else []
+        count, *_ = pipeline.run(connection, [explorations.count_stored_step(**counted),
+                                              *finishing], commit=commit)
         row = count.fetchone()
         assert row is not None  # the poses' foreign key: the row exists
         return row[0], row[1]
-    exploration = connection.execute(_COUNT, counted).one()
+    exploration = explorations.count_stored(connection, counted)
     if finish:
-        finish_complete_explorations(session, [eid], now=now)
+        explorations.finish_complete(session, [eid], now=now)
     return exploration.status, exploration.created_at
 
 

@@ -1,7 +1,8 @@
 """The tile queue's transactions: lease, renew, fail, put expired leases back, retry.
 
 Each function is one transaction and commits it; the tile changes themselves are
-store/tiles.py's (the one module that writes tile state). Leasing is a single
+store/tiles.py's (the one module that writes tile state), the explorations' status changes
+store/explorations.py's (the one module that writes exploration rows). Leasing is a single
 `UPDATE … WHERE id IN (SELECT … LIMIT n) RETURNING …`: on PostgreSQL the inner SELECT takes
 `FOR UPDATE SKIP LOCKED`, so concurrent leasers never get the same tile nor wait on each
 other; on SQLite the statement runs under the single write lock, which gives the same.
@@ -15,11 +16,10 @@ from collections.abc import Iterable, Sequence
 from datetime import datetime, timedelta
 
 from graspscape.services.coordinator.errors import Conflict, NotFound, WorkerIdTaken
-from graspscape.services.coordinator.store import tiles
+from graspscape.services.coordinator.store import explorations, tiles
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.dialect import is_postgres
 from graspscape.services.coordinator.store.models import (
-    TERMINAL_TILE_STATES,
     ExplorationRow,
     ExplorationStatus,
     TileRow,
@@ -28,24 +28,13 @@ from graspscape.services.coordinator.store.models import (
 from graspscape.services.coordinator.store.workers import touch_worker
 from graspscape.shared.wire.messages import LeasedTile
 from pydantic import BaseModel
-from sqlalchemy import ColumnElement, String, bindparam, case, cast, literal, select, update
+from sqlalchemy import ColumnElement, String, cast, literal, select
 from sqlalchemy.orm import Session
 
 
 class RequeueReport(BaseModel):
     requeued: int
     failed: int
-
-
-_START_EXPLORATIONS = (
-    update(ExplorationRow)
-    .where(
-        ExplorationRow.id.in_(bindparam("ids", expanding=True)),
-        ExplorationRow.status == ExplorationStatus.QUEUED,
-    )
-    .values(status=ExplorationStatus.RUNNING, started_at=bindparam("now"),
-            updated_at=bindparam("now"))
-)
 
 
 def lease_tiles(
@@ -73,7 +62,7 @@ def lease_tiles(
                          skip_locked=is_postgres(session), engines=engines)
     exploration_ids = sorted({t.exploration_id for t in leased})
     if exploration_ids:
-        session.connection().execute(_START_EXPLORATIONS, {"ids": exploration_ids, "now": now})
+        explorations.start(session, exploration_ids, now)
     bound = touch_worker(session, worker_id=worker_id, host=host, capacity=capacity, now=now,
                          session_hash=session_hash)
     if session_hash is not None and bound != session_hash:
@@ -128,7 +117,7 @@ def fail_tile(
             raise NotFound(f"tile {tile_id} does not exist")
         return state
     if row.state == TileState.FAILED:
-        finish_complete_explorations(session, [row.exploration_id], now=now)
+        explorations.finish_complete(session, [row.exploration_id], now=now)
     session.commit()
     return row.state
 
@@ -148,18 +137,19 @@ def requeue_where(
     The one mechanism behind lease expiry and lost workers, so both count attempts alike.
     """
     leased = (TileRow.state == TileState.LEASED, *conditions)
-    explorations = session.scalars(select(TileRow.exploration_id).where(*leased).distinct()).all()
-    if not explorations:
+    exploration_ids = session.scalars(select(TileRow.exploration_id).where(*leased)
+                                      .distinct()).all()
+    if not exploration_ids:
         session.commit()
         return 0, 0
-    lock_explorations(session, explorations)
+    lock_explorations(session, exploration_ids)
     # Tiles that came to match since are left to the next call: their explorations are not
     # locked here.
     requeued, failed = tiles.requeue_leased(
-        session, (*conditions, TileRow.exploration_id.in_(explorations)),
+        session, (*conditions, TileRow.exploration_id.in_(exploration_ids)),
         max_attempts=max_attempts, now=now, failed_error=failed_error,
         requeued_error=requeued_error)
-    finish_complete_explorations(session, failed, now=now)
+    explorations.finish_complete(session, failed, now=now)
     session.commit()
     return requeued, len(failed)
 
@@ -182,40 +172,6 @@ def requeue_expired(
     return RequeueReport(requeued=requeued, failed=failed)
 
 
-# Tiles that still have work ahead. `state IN` these (not `NOT IN` the terminal ones) looks
-# the exploration's open tiles up in the (state, exploration_id, ...) index instead of reading
-# every tile of the exploration, each time a tile finishes.
-_OPEN_TILE_STATES = tuple(s for s in TileState if s not in TERMINAL_TILE_STATES)
-# An exploration is done only when every tile is done, i.e. every planned pose is stored;
-# with failed tiles it is incomplete, or failed when not a single pose was stored. Read in the
-# statement that finishes it, under the exploration's row lock (see lock_explorations).
-_ANY_FAILED = (
-    select(TileRow.id)
-    .where(TileRow.exploration_id == ExplorationRow.id, TileRow.state == TileState.FAILED)
-    .exists()
-)
-FINISH_EXPLORATIONS = (
-    update(ExplorationRow)
-    .where(
-        ExplorationRow.id.in_(bindparam("ids", expanding=True)),
-        ExplorationRow.status.in_((ExplorationStatus.QUEUED, ExplorationStatus.RUNNING)),
-        ~select(TileRow.id)
-        .where(TileRow.exploration_id == ExplorationRow.id)
-        .where(TileRow.state.in_(_OPEN_TILE_STATES))
-        .exists(),
-    )
-    .values(
-        status=case(
-            (_ANY_FAILED & (ExplorationRow.poses_done > 0), ExplorationStatus.INCOMPLETE.value),
-            (_ANY_FAILED, ExplorationStatus.FAILED.value),
-            else_=ExplorationStatus.DONE.value,
-        ),
-        finished_at=bindparam("now"),
-        updated_at=bindparam("now"),
-    )
-)
-
-
 def lock_explorations(session: Session, exploration_ids: Iterable[int]) -> None:
     """Row locks on explorations (in id order), held to the commit, before any tile of theirs
     changes state. Failure and requeue take them first; ingest takes a key-share lock on the
@@ -231,17 +187,6 @@ def lock_explorations(session: Session, exploration_ids: Iterable[int]) -> None:
     if ids:
         session.execute(select(ExplorationRow.id).where(ExplorationRow.id.in_(ids))
                         .order_by(ExplorationRow.id).with_for_update()).all()
-
-
-def finish_complete_explorations(
-    session: Session, exploration_ids: Iterable[int], *, now: datetime
-) -> None:
-    """Finish running explorations once none of their tiles is queued or leased: done when
-    every tile is done, else incomplete (some poses stored) or failed (none)."""
-    ids = sorted(set(exploration_ids))
-    if not ids:
-        return
-    session.connection().execute(FINISH_EXPLORATIONS, {"ids": ids, "now": now})
 
 
 def retry_failed_tiles(
@@ -265,11 +210,6 @@ def retry_failed_tiles(
     if not requeued:
         session.rollback()
         raise Conflict(f"exploration {exploration_id} has no failed tiles to retry")
-    session.execute(
-        update(ExplorationRow)
-        .where(ExplorationRow.id == exploration_id)
-        .values(status=ExplorationStatus.RUNNING, finished_at=None, updated_at=now)
-        .execution_options(synchronize_session=False)
-    )
+    explorations.reopen(session, exploration_id, status, now)
     session.commit()
     return requeued

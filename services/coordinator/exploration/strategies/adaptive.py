@@ -50,7 +50,8 @@ from graspscape.services.coordinator.exploration.tiling import (
 )
 from graspscape.services.coordinator.manifolds.behaviour import StoredPose
 from graspscape.services.coordinator.manifolds.service import refresh_manifolds
-from graspscape.services.coordinator.store.models import ExplorationRow, PosePlanRow, TileRow
+from graspscape.services.coordinator.store import explorations
+from graspscape.services.coordinator.store.models import PosePlanRow, TileRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -205,9 +206,7 @@ class AdaptiveStrategy:
         where next_round stored the manifolds of these very samples and planned nothing more
         are they the finished exploration's (what the keeper's final refresh would note)."""
         if stage == Stage.FINISHED and self._refreshed:
-            row = batch.session.get(ExplorationRow, batch.exploration_id)
-            if row is not None:
-                row.manifolds_final = True
+            explorations.mark_table_final(batch.session, batch.exploration_id)
 
     # --- helpers -------------------------------------------------------------------------
     def _plans(self, batch: Batch) -> int:
