@@ -12,6 +12,8 @@ from datetime import timedelta
 from typing import Any
 
 import pytest
+from fastapi.testclient import TestClient
+from graspscape.services.coordinator.app import create_app
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds import keeper, service
@@ -153,3 +155,17 @@ def test_of_two_taking_a_run_out_lease_at_once_exactly_one_does(
         assert sorted(won.values()) == [False, True], round_
         with sessions() as s:
             assert _lease(s, eid)[0] == next(me for me, w in won.items() if w)
+
+
+def test_a_coordinator_gives_its_leases_back_when_it_stops(
+        settings, sessions, named_object, monkeypatch) -> None:
+    monkeypatch.setattr(keeper, "REFRESH_MIN_POSES", 20)
+    spec = sphere_grid(named_object, dtheta_deg=30, r_max=0.02, rolls=2)
+    with sessions() as s:
+        eid = create_exploration(s, spec=spec, tile_target_poses=8, max_poses=10**6).id
+        _store(s, _leased(s)[:4], finisher=keeper.KEEPER)  # the process's keeper: the app's
+        assert _lease(s, eid)[0] == keeper.KEEPER.me
+    with TestClient(create_app(settings)):
+        pass
+    with sessions() as s:
+        assert _lease(s, eid) == (None, None)
