@@ -61,6 +61,14 @@ def _catch_up(app: FastAPI) -> None:
         KEEPER.catch_up(session)
 
 
+def _release(app: FastAPI) -> None:
+    # Another coordinator keeps these tables at its next batch, not after the leases run out.
+    from graspscape.services.coordinator.manifolds.keeper import KEEPER
+
+    with app.state.sessionmaker() as session:
+        KEEPER.release(session)
+
+
 async def _sweeper(app: FastAPI) -> None:
     while True:
         await asyncio.sleep(app.state.settings.queue.requeue_interval_s)
@@ -98,6 +106,10 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
+        try:
+            await run_in_threadpool(_release, app)
+        except Exception:  # the leases run out by themselves (manifolds/keeper.LEASE_S)
+            log.exception("the manifold tables' leases were not given back")
         app.state.engine.dispose()
 
 

@@ -8,15 +8,32 @@ write: the routes serve the table as stored, with `manifolds_poses_done` against
 (the lag) in the exploration's progress.
 
 The lag it keeps, stated:
-- while an exploration runs, after each batch the table is at most `due_after(done)` poses
-  behind: a quarter of the poses it was refreshed at, at least REFRESH_MIN_POSES and at most
-  REFRESH_MAX_POSES (1,000); a refresh costs about its new poses, so a large map is refreshed
-  every 1,000 poses, each refresh bounded;
+- while an exploration runs, after each batch its keeper (below) stores, the table is at
+  most `due_after(done)` poses behind: a quarter of the poses it was refreshed at, at least
+  REFRESH_MIN_POSES and at most REFRESH_MAX_POSES (1,000); a refresh costs about its new
+  poses, so a large map is refreshed every 1,000 poses, each refresh bounded;
 - while another thread refreshes the same exploration, a batch does not wait for it, unless
   the table is more than MAX_LAG_POSES (5,000) behind: then it waits and refreshes (back
   pressure on the ingest instead of a table falling further behind);
 - a finished exploration (done, failed, cancelled): the batch or cancel that finished it
   waits for the final table before it returns, so a client that saw `done` reads it final.
+
+One keeper per exploration, whichever coordinator process stores its batches: the process
+that refreshes a running exploration's table holds a lease on it (`manifolds_keeper`, the
+process's id, and `manifolds_keeper_until`, LEASE_S ahead, renewed at each of its refreshes),
+taken by one conditional UPDATE in a transaction of its own (free, its own, or run out), so
+that of two processes taking it at once exactly one does. A batch stored by another process
+reads the lease and goes on: it never waits on the table. The holder refreshes the table at
+its own batches and at every lease sweep (`catch_up`, each `queue.requeue_interval_s`), each
+time it is due; so after any batch the table is at most MAX_LAG_POSES behind, and after the
+holder's batches and sweeps within the lag above. A process takes the lease over, whoever
+holds it, where the table is more than MAX_LAG_POSES behind (the holder too slow, or gone:
+a process that stopped without giving its leases back is waited for at most LEASE_S, or
+until the table is that far behind) and to write the final table, which gives the lease up.
+The process that takes a table over reads it once (manifolds/live._adopt), then refreshes
+from the rows stored since. The lease decides who does the work, never what is written: two
+refreshes of one exploration still take its row lock in turn, and each writes a table equal
+to the whole rewrite.
 
 Off-lattice poses (the random, CMA-ES and PPO strategies, whose poses are drawn, not placed
 on the lattice) are kept apart: stored, counted in `poses_done`, listed, exported and ranked
@@ -30,12 +47,15 @@ from __future__ import annotations
 import logging
 import threading
 import time
+import uuid
 from collections.abc import Hashable
 from dataclasses import dataclass, field
+from datetime import datetime, timedelta
 
 from graspscape.services.coordinator.manifolds.service import prefeed, refresh_manifolds
+from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import FINISHED_STATUSES, ExplorationRow
-from sqlalchemy import select
+from sqlalchemy import Update, select, update
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
@@ -44,6 +64,7 @@ REFRESH_GROWTH = 0.25
 REFRESH_MIN_POSES = 250
 REFRESH_MAX_POSES = 1_000
 MAX_LAG_POSES = 5_000
+LEASE_S = 30.0  # the keeper's lease: three sweeps at the default queue.requeue_interval_s
 
 
 def due_after(refreshed_at: int) -> int:
@@ -62,40 +83,53 @@ class Upkeep:
 
 @dataclass
 class Keeper:
-    """One per process: a lock per exploration (two threads never refresh one exploration at
-    once: the second goes on, or waits where the lag is past MAX_LAG_POSES)."""
+    """One per process, with an id of its own (`me`): a lock per exploration (two threads
+    never refresh one exploration at once: the second goes on, or waits where the lag is
+    past MAX_LAG_POSES), and the lease on the explorations it keeps (module docstring)."""
 
     upkeep: Upkeep = field(default_factory=Upkeep)
+    me: str = field(default_factory=lambda: uuid.uuid4().hex)
+    lease_s: float = LEASE_S
     _locks: dict[Hashable, threading.Lock] = field(default_factory=dict)
+    _leased: set[str] = field(default_factory=set)  # the databases it took a lease in
     _guard: threading.Lock = field(default_factory=threading.Lock)
 
     def _lock(self, key: Hashable) -> threading.Lock:
         with self._guard:
             return self._locks.setdefault(key, threading.Lock())
 
-    def keep(self, session: Session, exploration_id: int) -> bool:
-        """Refresh the exploration's table where it is due (module docstring), in a
-        transaction of its own, committed. The session must have nothing uncommitted.
-        True where this call refreshed."""
+    def keep(self, session: Session, exploration_id: int, *,
+             now: datetime | None = None) -> bool:
+        """Refresh the exploration's table where it is due and this process keeps it (module
+        docstring), in a transaction of its own, committed. The session must have nothing
+        uncommitted. True where this call refreshed."""
+        now = now or utcnow()
         behind = _behind(session, exploration_id)
         session.rollback()  # the read's transaction: the refresh starts its own
         if behind is None:
             return False
-        finished, lag, _ = behind
+        # Another process's lease: read, not taken, so that this batch waits on nothing.
+        if not behind.pressing and behind.kept_by_other(self.me, now):
+            return False
         key = (str(session.get_bind().url), exploration_id)
         lock = self._lock(key)
-        if not lock.acquire(blocking=finished or lag > MAX_LAG_POSES):
+        if not lock.acquire(blocking=behind.pressing):
             return False
         try:
             behind = _behind(session, exploration_id)  # again: another may have just done it
-            if behind is None:
-                session.rollback()
+            session.rollback()  # the lease's UPDATE first in its transaction (SQLite's WAL)
+            if behind is None or not self._take(session, exploration_id, now,
+                                                force=behind.pressing):
                 return False
             cpu, wall = time.process_time(), time.perf_counter()
             # The new rows fed first without the exploration's row lock: the batches of this
             # exploration wait at their counter update only for the rest and the write.
             prefeed(session, exploration_id)
-            refresh_manifolds(session, exploration_id, final=behind[0])
+            refresh_manifolds(session, exploration_id, final=behind.finished)
+            # Renewed (or, final, given up) in the write's transaction: its row is locked.
+            lease = (None, None) if behind.finished else (
+                self.me, now + timedelta(seconds=self.lease_s + time.perf_counter() - wall))
+            session.execute(_lease_update(exploration_id, self.me, *lease))
             session.commit()
             self.upkeep.refreshes += 1
             self.upkeep.cpu_s += time.process_time() - cpu
@@ -107,9 +141,37 @@ class Keeper:
         finally:
             lock.release()
 
-    def catch_up(self, session: Session) -> int:
-        """Keep every exploration whose table is behind (the lease sweep's turn: a table a
-        crash between a batch's commit and its refresh left behind). Returns how many it
+    def _take(self, session: Session, exploration_id: int, now: datetime, *,
+              force: bool) -> bool:
+        """Take or renew the lease, in a short transaction of its own, committed: one
+        conditional UPDATE, so that of two processes taking a free or run out lease at once
+        exactly one matches the row (PostgreSQL re-checks the condition on the row the first
+        committed; SQLite writes one at a time). `force`: whoever holds it (the table too far
+        behind, or final). True where this process holds it now."""
+        until = now + timedelta(seconds=self.lease_s)
+        statement = _lease_update(exploration_id, None, self.me, until)
+        if not force:
+            statement = statement.where(
+                ExplorationRow.manifolds_keeper.is_(None)
+                | (ExplorationRow.manifolds_keeper == self.me)
+                | (ExplorationRow.manifolds_keeper_until < now))
+        try:
+            taken = session.execute(statement).rowcount == 1  # type: ignore[attr-defined]
+            session.commit()
+        except Exception:
+            session.rollback()
+            raise
+        if taken:
+            self._leased.add(str(session.get_bind().url))
+        if taken and force:
+            log.info("exploration %s: the manifold table kept here (%s)", exploration_id,
+                     self.me)
+        return taken
+
+    def catch_up(self, session: Session, *, now: datetime | None = None) -> int:
+        """Keep every exploration whose table is behind (the lease sweep's turn: the table
+        of an exploration this process keeps, between its own batches; a table a crash
+        between a batch's commit and its refresh left behind). Returns how many it
         refreshed."""
         ids = session.scalars(select(ExplorationRow.id).where(
             (ExplorationRow.manifolds_poses_done.is_(None) & (ExplorationRow.poses_done > 0))
@@ -120,30 +182,80 @@ class Keeper:
         refreshed = 0
         for exploration_id in ids:
             try:
-                refreshed += self.keep(session, exploration_id)
+                refreshed += self.keep(session, exploration_id, now=now)
             except Exception:  # one exploration's failure must not stop the others'
                 log.warning("exploration %s: the manifold table was not caught up",
                             exploration_id, exc_info=True)
         return refreshed
 
+    def release(self, session: Session) -> int:
+        """Give up this process's leases (at its shutdown: another process keeps those
+        tables at its next batch instead of after the lease runs out). Committed; returns
+        how many."""
+        if str(session.get_bind().url) not in self._leased:
+            return 0
+        try:
+            released = session.execute(
+                update(ExplorationRow).where(ExplorationRow.manifolds_keeper == self.me)
+                .values(manifolds_keeper=None, manifolds_keeper_until=None)
+            ).rowcount  # type: ignore[attr-defined]
+            session.commit()
+        except Exception:
+            session.rollback()
+            raise
+        return int(released)
 
-def _behind(session: Session, exploration_id: int) -> tuple[bool, int, int] | None:
-    """(finished, poses behind, poses the table is at) where a refresh is due, else None."""
+
+def _lease_update(exploration_id: int, holder: str | None, keeper: str | None,
+                  until: datetime | None) -> Update:
+    """The lease set to (keeper, until); where `holder`, only on a row it holds."""
+    statement = update(ExplorationRow).where(ExplorationRow.id == exploration_id)
+    if holder is not None:
+        statement = statement.where(ExplorationRow.manifolds_keeper == holder)
+    return statement.values(manifolds_keeper=keeper, manifolds_keeper_until=until) \
+        .execution_options(synchronize_session=False)
+
+
+@dataclass(frozen=True)
+class Behind:
+    """Where a refresh is due: how far behind, and who keeps the table."""
+
+    finished: bool
+    lag: int
+    at: int  # the poses the table is at
+    keeper: str | None
+    keeper_until: datetime | None
+
+    @property
+    def pressing(self) -> bool:
+        """Refreshed by whoever gets here, lease or not: the final table, or a table more
+        than MAX_LAG_POSES behind (its keeper too slow, or gone)."""
+        return self.finished or self.lag > MAX_LAG_POSES
+
+    def kept_by_other(self, me: str, now: datetime) -> bool:
+        return (self.keeper is not None and self.keeper != me
+                and self.keeper_until is not None and self.keeper_until >= now)
+
+
+def _behind(session: Session, exploration_id: int) -> Behind | None:
+    """Where a refresh is due, else None."""
     row = session.execute(
         select(ExplorationRow.status, ExplorationRow.poses_done,
-               ExplorationRow.manifolds_poses_done, ExplorationRow.manifolds_final)
+               ExplorationRow.manifolds_poses_done, ExplorationRow.manifolds_final,
+               ExplorationRow.manifolds_keeper, ExplorationRow.manifolds_keeper_until)
         .where(ExplorationRow.id == exploration_id)).one_or_none()
     if row is None:
         return None
     at = row.manifolds_poses_done or 0
     lag = row.poses_done - at
+    lease = (row.manifolds_keeper, row.manifolds_keeper_until)
     if row.status in FINISHED_STATUSES:
         if row.manifolds_final and lag == 0:
             return None
         if row.poses_done == 0 and row.manifolds_final:
             return None
-        return True, lag, at
-    return (False, lag, at) if lag > 0 and lag >= due_after(at) else None
+        return Behind(True, lag, at, *lease)
+    return Behind(False, lag, at, *lease) if lag > 0 and lag >= due_after(at) else None
 
 
 KEEPER = Keeper()  # the process's keeper (the coordinator's, the local runner's)

@@ -119,6 +119,10 @@ class ExplorationRow(Base):
     # (null: never), and whether it was the final refresh of the finished exploration.
     manifolds_poses_done: Mapped[int | None] = mapped_column(Integer)
     manifolds_final: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+    # The keeper's lease (manifolds/keeper.py): the process that keeps the table while the
+    # exploration runs, and until when; null: none.
+    manifolds_keeper: Mapped[str | None] = mapped_column(String(32))
+    manifolds_keeper_until: Mapped[datetime | None] = mapped_column()
     # On a table (support 'plane', migration 0017): the group of explorations of one
     # submission, one per resting pose (the id of its first), and this one's resting pose's
     # rank and probability (the pose itself: spec.support.resting). Null: a free object.
