@@ -53,9 +53,10 @@ from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 
 from graspscape.services.coordinator.manifolds.service import prefeed, refresh_manifolds
+from graspscape.services.coordinator.store import explorations
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import FINISHED_STATUSES, ExplorationRow
-from sqlalchemy import Update, select, update
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
@@ -129,7 +130,7 @@ class Keeper:
             # Renewed (or, final, given up) in the write's transaction: its row is locked.
             lease = (None, None) if behind.finished else (
                 self.me, now + timedelta(seconds=self.lease_s + time.perf_counter() - wall))
-            session.execute(_lease_update(exploration_id, self.me, *lease))
+            explorations.set_keeper_lease(session, exploration_id, *lease, holder=self.me)
             session.commit()
             self.upkeep.refreshes += 1
             self.upkeep.cpu_s += time.process_time() - cpu
@@ -149,14 +150,9 @@ class Keeper:
         committed; SQLite writes one at a time). `force`: whoever holds it (the table too far
         behind, or final). True where this process holds it now."""
         until = now + timedelta(seconds=self.lease_s)
-        statement = _lease_update(exploration_id, None, self.me, until)
-        if not force:
-            statement = statement.where(
-                ExplorationRow.manifolds_keeper.is_(None)
-                | (ExplorationRow.manifolds_keeper == self.me)
-                | (ExplorationRow.manifolds_keeper_until < now))
         try:
-            taken = session.execute(statement).rowcount == 1  # type: ignore[attr-defined]
+            taken = explorations.set_keeper_lease(session, exploration_id, self.me, until,
+                                                  free_at=None if force else now)
             session.commit()
         except Exception:
             session.rollback()
@@ -195,25 +191,12 @@ class Keeper:
         if str(session.get_bind().url) not in self._leased:
             return 0
         try:
-            released = session.execute(
-                update(ExplorationRow).where(ExplorationRow.manifolds_keeper == self.me)
-                .values(manifolds_keeper=None, manifolds_keeper_until=None)
-            ).rowcount  # type: ignore[attr-defined]
+            released = explorations.release_keeper_leases(session, self.me)
             session.commit()
         except Exception:
             session.rollback()
             raise
         return int(released)
-
-
-def _lease_update(exploration_id: int, holder: str | None, keeper: str | None,
-                  until: datetime | None) -> Update:
-    """The lease set to (keeper, until); where `holder`, only on a row it holds."""
-    statement = update(ExplorationRow).where(ExplorationRow.id == exploration_id)
-    if holder is not None:
-        statement = statement.where(ExplorationRow.manifolds_keeper == holder)
-    return statement.values(manifolds_keeper=keeper, manifolds_keeper_until=until) \
-        .execution_options(synchronize_session=False)
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,8 @@
 
 Its status, its counters (tiles_total, poses_total, poses_done, viable_count), its times
 (started_at, finished_at, updated_at), its group (support_group), the manifold table's mark
-(manifolds_poses_done, manifolds_final), its creation and its deletion. Nothing else in the
+(manifolds_poses_done, manifolds_final) and who keeps it (manifolds_keeper,
+manifolds_keeper_until), its creation and its deletion. Nothing else in the
 coordinator writes the row (tests/services/coordinator/store/test_exploration_state_owner.py
 reads the source to keep it so); reads stay where they are needed. A new write of the row (a
 new column, a lease on it) is one more named function here, beside these.
@@ -36,7 +37,10 @@ transaction and never commits; the caller that owns the unit of work commits:
   (exploration/planning.py), `mark_table_final` (strategies/adaptive.py);
 - whoever runs manifolds.service.refresh_manifolds (the manifold keeper, the readers that
   ensure a current table, the adaptive strategy inside the scheduler's transaction):
-  `lock_for_table` and `mark_table`.
+  `lock_for_table` and `mark_table`;
+- manifolds/keeper.py, each in a short transaction of its own: `set_keeper_lease` (taking,
+  renewing or giving up the lease on the manifold table), `release_keeper_leases` (at the
+  coordinator's shutdown).
 """
 
 from __future__ import annotations
@@ -276,3 +280,35 @@ def mark_table_final(session: Session, exploration_id: int) -> None:
     row = session.get(ExplorationRow, exploration_id)
     if row is not None:
         row.manifolds_final = True
+
+
+# --- the manifold table's keeper lease (manifolds/keeper.py) ---------------------------------
+def set_keeper_lease(session: Session, exploration_id: int, keeper: str | None,
+                     until: datetime | None, *, holder: str | None = None,
+                     free_at: datetime | None = None) -> bool:
+    """The lease set to (keeper, until), in one conditional UPDATE: where `holder`, only on a
+    row it holds; where `free_at`, only on a row whose lease is free, this keeper's own or run
+    out at that time. Two processes taking a free lease at once: exactly one matches the row
+    (PostgreSQL re-checks the condition on the row the first committed; SQLite writes one at a
+    time). True where the row matched."""
+    statement = update(ExplorationRow).where(ExplorationRow.id == exploration_id)
+    if holder is not None:
+        statement = statement.where(ExplorationRow.manifolds_keeper == holder)
+    if free_at is not None:
+        statement = statement.where(
+            ExplorationRow.manifolds_keeper.is_(None)
+            | (ExplorationRow.manifolds_keeper == keeper)
+            | (ExplorationRow.manifolds_keeper_until < free_at))
+    result = session.execute(
+        statement.values(manifolds_keeper=keeper, manifolds_keeper_until=until)
+        .execution_options(synchronize_session=False))
+    return result.rowcount == 1  # type: ignore[attr-defined]
+
+
+def release_keeper_leases(session: Session, keeper: str) -> int:
+    """Every lease `keeper` holds given up; how many."""
+    result = session.execute(
+        update(ExplorationRow).where(ExplorationRow.manifolds_keeper == keeper)
+        .values(manifolds_keeper=None, manifolds_keeper_until=None)
+        .execution_options(synchronize_session=False))
+    return int(result.rowcount)  # type: ignore[attr-defined]
