@@ -146,4 +146,9 @@ def _behind(session: Session, exploration_id: int) -> tuple[bool, int, int] | No
     return (False, lag, at) if lag > 0 and lag >= due_after(at) else None
 
 
-KEEPER = Keeper()  # the process's keeper (the coordinator's, the local runner's)
+def current_keeper() -> Keeper:
+    """The keeper of the coordinator in use: the app's, else the process's (the local
+    runner's): its state's `keeper` (services/coordinator/state.py)."""
+    from graspscape.services.coordinator.state import current
+
+    return current().keeper
