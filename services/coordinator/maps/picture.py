@@ -9,9 +9,10 @@ refresh, are drawn ahead and stored (maps/stored.py), so their first read in a p
 row read while the version matches.
 
 What a picture is drawn from — the poses' arrays and the manifold table, ~0.2 s of reading at
-100k poses and seconds at 1M — is kept for the last INPUT_VERSIONS map versions, so another
-cut, φ0, r or attitude of the same version reads nothing again (nor derives its directions,
-trees and 3D markers again: maps/derived.py); and one drawing per picture at a time: a request
+100k poses and seconds at 1M — is kept for the last two map versions (the coordinator
+state's `picture_inputs`: state.py), so another cut, φ0, r or attitude of the same version
+reads nothing again (nor derives its directions, trees and 3D markers again:
+maps/derived.py); and one drawing per picture at a time: a request
 for a picture being drawn waits for it instead of drawing it too (the 8 clients of one page ask
 for the same picture at once), and the default picture waits for its draw-ahead in flight.
 When a stored default picture is served and its version's inputs are not kept (a restart,
