@@ -163,7 +163,10 @@ def test_two_apps_in_one_process_share_no_state(
         eid = _explore(one, sessions, object_id)
         assert one.get(f"/explorations/{eid}/best").status_code == 200
         assert state.of(first).answers and not state.of(second).answers
+        assert not state.of(second).specs
         assert two.get(f"/explorations/{eid}/best").json() == one.get(
             f"/explorations/{eid}/best").json()
         assert state.of(second).answers  # its own, computed again
+        # and deeper down, in the route's thread (the parsed spec: mapspace/specs.py)
+        assert state.of(second).specs
         assert len(state.default().answers) == process  # neither app's went to the process's
