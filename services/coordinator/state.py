@@ -98,21 +98,28 @@ class Bounded(Generic[K, V]):
     def put(self, key: K, value: V) -> V:
         """Keep `value` under `key` (replacing what was there); returns it."""
         with self._lock:
-            old = self._entries.pop(key, None)
-            if old is not None:
-                self._held -= self._bytes(old)
-            self._entries[key] = value
-            self._held += self._bytes(value)
-            while self._entries and (len(self._entries) > self.count or (
-                    self.max_bytes is not None and self._held > self.max_bytes)):
-                self._held -= self._bytes(self._entries.popitem(last=False)[1])
+            self._put(key, value)
         return value
 
     def setdefault(self, key: K, value: V) -> V:
         """The kept value, else `value`, kept now (the first of two racing writers wins)."""
         with self._lock:
             found = self._entries.get(key)
-        return found if found is not None else self.put(key, value)
+            if found is not None:
+                self._entries.move_to_end(key)
+                return found
+            self._put(key, value)
+        return value
+
+    def _put(self, key: K, value: V) -> None:  # under the lock
+        old = self._entries.pop(key, None)
+        if old is not None:
+            self._held -= self._bytes(old)
+        self._entries[key] = value
+        self._held += self._bytes(value)
+        while self._entries and (len(self._entries) > self.count or (
+                self.max_bytes is not None and self._held > self.max_bytes)):
+            self._held -= self._bytes(self._entries.popitem(last=False)[1])
 
     def pop(self, key: K) -> V | None:
         with self._lock:

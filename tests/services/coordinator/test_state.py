@@ -170,3 +170,17 @@ def test_two_apps_in_one_process_share_no_state(
         # and deeper down, in the route's thread (the parsed spec: mapspace/specs.py)
         assert state.of(second).specs
         assert len(state.default().answers) == process  # neither app's went to the process's
+
+
+def test_a_bounded_cache_drops_the_least_recently_used() -> None:
+    kept: state.Bounded[str, int] = state.Bounded(2)
+    kept.put("a", 1)
+    kept.put("b", 2)
+    assert kept.peek("a") == 1  # looked at, not used: still the first out
+    kept.put("c", 3)
+    assert "a" not in kept and kept.get("b") == 2  # used: "c" is now the oldest
+    kept.put("d", 4)
+    assert "c" not in kept and kept.setdefault("b", 20) == 2 and kept.setdefault("e", 5) == 5
+    assert sorted(kept.values()) == [2, 5]
+    kept.clear()
+    assert len(kept) == 0
