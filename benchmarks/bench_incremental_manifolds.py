@@ -40,6 +40,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 # before anything imports a module of the packages a baseline run swaps
 try:
@@ -226,7 +227,7 @@ def measure_store(figures: dict[str, float], dtheta: float = 0.056,
                 else ("running", "snapshot")
             for mode in modes:
                 if mode != "running":  # a restart: the process's maps are gone
-                    service.MAPS.clear()
+                    _running_maps().clear()
                     load_cpu.clear()
                 if mode == "cold":  # and no snapshot either (none read, none written)
                     shutil.rmtree(f"{folder}/maps", ignore_errors=True)
@@ -316,3 +317,14 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def _running_maps() -> Any:
+    """The process's running maps (services/coordinator/state.py)."""
+    try:
+        from graspscape.services.coordinator.state import current
+    except ImportError:  # a baseline from before the coordinator's state
+        from graspscape.services.coordinator.manifolds import service
+
+        return service.MAPS  # type: ignore[attr-defined]
+    return current().maps

@@ -69,12 +69,17 @@ from benchmarks.bench_query import bench_result  # noqa: E402
 from tests.factories import fake_results  # noqa: E402
 
 try:  # the keeper runs the refresh after each committed batch (manifolds/keeper.py)
-    from graspscape.services.coordinator.manifolds.keeper import KEEPER
-except ImportError:  # a --baseline run of the packages from before the keeper
-    KEEPER = None
-    from graspscape.services.coordinator.manifolds.service import (
-        maybe_refresh,
-    )
+    from graspscape.services.coordinator.manifolds.keeper import current_keeper
+
+    KEEPER: Any = current_keeper()  # the process's (no app here: services/coordinator/state.py)
+except ImportError:
+    try:  # a --baseline run of the packages from before the coordinator's state
+        from graspscape.services.coordinator.manifolds.keeper import KEEPER
+    except ImportError:  # a --baseline run of the packages from before the keeper
+        KEEPER = None
+        from graspscape.services.coordinator.manifolds.service import (
+            maybe_refresh,
+        )
 # The store alone (no manifold table kept) where the refresh is not what is measured.
 STORE_ONLY: dict[str, Any] = {} if KEEPER is None else {"keeper": None}
 

@@ -3,7 +3,9 @@
 `create_app(settings)` builds an independent app (tests make one per database); the lease
 sweeper puts expired leases back in the queue at start (so a restart recovers the tiles of
 workers that died meanwhile) and then every requeue_interval_s. With `settings.zenoh.enabled`
-the lifespan also runs the zenoh dispatch (services/coordinator/dispatch).
+the lifespan also runs the zenoh dispatch (services/coordinator/dispatch). Each app has its own
+caches and background threads (`app.state.coordinator`: services/coordinator/state.py), which
+the lifespan's end joins and empties, after the dispatcher has stopped.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from fastapi import FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from graspscape.services.coordinator import db, web
+from graspscape.services.coordinator import db, state, web
 from graspscape.services.coordinator.api import (
     answers,
     budget,
@@ -32,7 +34,6 @@ from graspscape.services.coordinator.api import (
 )
 from graspscape.services.coordinator.api.finite import validation_error_handler
 from graspscape.services.coordinator.errors import CoordinatorError, InvalidInput
-from graspscape.services.coordinator.manifolds import snapshot
 from graspscape.services.coordinator.maps.stored import start_warm_up
 from graspscape.services.coordinator.metrics import Metrics
 from graspscape.services.coordinator.settings import Settings, get_settings
@@ -55,18 +56,14 @@ def _catch_up(app: FastAPI) -> None:
     # A manifold table left behind (a crash between a batch's commit and the keeper's turn,
     # a failed exploration): the keeper's backstop, each sweep interval. Not in the first
     # sweep of the lifespan, which the app's start waits for.
-    from graspscape.services.coordinator.manifolds.keeper import KEEPER
-
     with app.state.sessionmaker() as session:
-        KEEPER.catch_up(session)
+        state.of(app).keeper.catch_up(session)
 
 
 def _release(app: FastAPI) -> None:
     # Another coordinator keeps these tables at its next batch, not after the leases run out.
-    from graspscape.services.coordinator.manifolds.keeper import KEEPER
-
     with app.state.sessionmaker() as session:
-        KEEPER.release(session)
+        state.of(app).keeper.release(session)
 
 
 async def _sweeper(app: FastAPI) -> None:
@@ -81,6 +78,15 @@ async def _sweeper(app: FastAPI) -> None:
 
 @contextlib.asynccontextmanager
 async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
+    # The app's state current for the lifespan: the sweeper task and the thread pool's
+    # calls made from here inherit it (state.py).
+    with state.using(state.of(app)):
+        async with _running(app):
+            yield
+
+
+@contextlib.asynccontextmanager
+async def _running(app: FastAPI) -> AsyncIterator[None]:
     try:
         await run_in_threadpool(_sweep, app)
     except Exception:  # e.g. not migrated yet: /healthz reports it, the sweeper retries
@@ -96,11 +102,10 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         )
         await run_in_threadpool(dispatcher.start)
     app.state.dispatcher = dispatcher
-    warm_up = start_warm_up()
+    start_warm_up(state.of(app))
     try:
         yield
     finally:
-        await run_in_threadpool(warm_up.join)
         if dispatcher is not None:
             await run_in_threadpool(dispatcher.stop)
         task.cancel()
@@ -110,6 +115,8 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             await run_in_threadpool(_release, app)
         except Exception:  # the leases run out by themselves (manifolds/keeper.LEASE_S)
             log.exception("the manifold tables' leases were not given back")
+        # Its threads (draw-aheads, read-aheads, the warm-up) may still use the engine.
+        await run_in_threadpool(state.of(app).close)
         app.state.engine.dispose()
 
 
@@ -146,13 +153,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.engine = db.make_engine(settings.database.resolved_url)
     app.state.sessionmaker = db.make_sessionmaker(app.state.engine)
     app.state.schema_head = db.head_revision()
-    # Running maps saved for a restart (manifolds/snapshot.py): beside a SQLite file, else here.
-    snapshot.configure(settings.database.data_dir / "manifold-maps")
+    # This app's caches and background threads (state.py); running maps are saved for a
+    # restart (manifolds/snapshot.py) beside a SQLite file, else in its snapshot folder.
+    app.state.coordinator = state.CoordinatorState(
+        snapshot_dir=settings.database.data_dir / "manifold-maps")
     app.state.metrics = Metrics(app.state.sessionmaker)
     # Kept answers of the map's read routes before FastAPI's routing (api/answers.py); inside
-    # the metrics middleware, which times and counts them as any request.
+    # the metrics middleware, which times and counts them as any request; all of it with the
+    # app's state current (outermost).
     app.add_middleware(answers.KeptRoutes)
     app.add_middleware(app.state.metrics.middleware)
+    app.add_middleware(state.UseState, state=app.state.coordinator)
 
     @app.exception_handler(CoordinatorError)
     async def _domain_error(_request: Request, exc: CoordinatorError) -> JSONResponse:

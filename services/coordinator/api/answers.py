@@ -12,8 +12,9 @@ exploration's version never moves again: its reads become one indexed row read a
 look-up. A read never refreshes the table (the keeper does, after committed batches:
 manifolds/keeper.py), so the version a route reads is the table it answers from.
 
-Per process, in memory, bounded by count and by bytes (a `/best?limit=100` answer with its
-poses' signatures and grasps is a few hundred kB), least recently used out. Entries are
+On the coordinator's state (state.py: `answers`, `routes`), in memory, bounded by count and
+by bytes (a `/best?limit=100` answer with its poses' signatures and grasps is a few hundred
+kB), least recently used out. Entries are
 response bodies (bytes), never objects a caller could change. The fast path's entries
 (`KeptRoutes`, below: the same answers keyed by the raw request) have bounds of their own, the
 same; mostly they share their bodies with this store's.
@@ -22,8 +23,6 @@ same; mostly they share their bodies with this store's.
 from __future__ import annotations
 
 import re
-import threading
-from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -31,16 +30,12 @@ from typing import Any
 
 import anyio.to_thread
 from graspscape.services.coordinator.errors import NotFound
+from graspscape.services.coordinator.state import Bounded, CoordinatorState, current
 from graspscape.services.coordinator.store.models import ExplorationRow
 from sqlalchemy import Engine, bindparam, select
 from sqlalchemy.orm import Session
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-CACHED_ANSWERS = 512
-CACHED_BYTES = 32 * 2**20
-_lock = threading.Lock()
-_answers: OrderedDict[Hashable, bytes] = OrderedDict()
-_held = [0]  # bytes held by _answers
 _VERSION = select(
     ExplorationRow.created_at, ExplorationRow.updated_at, ExplorationRow.status,
     ExplorationRow.poses_done, ExplorationRow.manifolds_poses_done,
@@ -58,33 +53,26 @@ def version(session: Session, exploration_id: int) -> tuple[Any, ...]:
     return (str(session.get_bind().url), exploration_id, *row)
 
 
-def answer(key: Hashable, compute: Callable[[], bytes]) -> bytes:
-    """The answer filed under `key` (a version and the request's parameters), computed once.
-    Two requests missing at once both compute (the same bytes); neither waits on the other.
-    `key[0]` is the map version (`version`): noted for `KeptRoutes`."""
+def answer(key: Hashable, compute: Callable[[], bytes],
+           kept: Bounded[Hashable, bytes] | None = None) -> bytes:
+    """The answer filed under `key` (a version and the request's parameters), computed once,
+    in `kept` (default: the current state's `answers`). Two requests missing at once both
+    compute (the same bytes); neither waits on the other. `key[0]` is the map version
+    (`version`): noted for `KeptRoutes`."""
     _note(key)
-    with _lock:
-        body = _answers.get(key)
-        if body is not None:
-            _answers.move_to_end(key)
-            return body
-    body = compute()
-    with _lock:
-        if key not in _answers:
-            _answers[key] = body
-            _held[0] += len(body)
-        while _answers and (len(_answers) > CACHED_ANSWERS or _held[0] > CACHED_BYTES):
-            _held[0] -= len(_answers.popitem(last=False)[1])
-    return body
+    answers = current().answers if kept is None else kept
+    body = answers.get(key)
+    if body is not None:
+        return body
+    return answers.setdefault(key, compute())
 
 
-def clear() -> None:
-    """Forget every answer (tests that compare a computed answer with a kept one)."""
-    with _lock:
-        _answers.clear()
-        _held[0] = 0
-        _routes.clear()
-        _routes_held[0] = 0
+def clear(state: CoordinatorState | None = None) -> None:
+    """Forget every answer of `state` (default: the current one; tests that compare a
+    computed answer with a kept one)."""
+    state = current() if state is None else state
+    state.answers.clear()
+    state.routes.clear()
 
 
 # --- the kept routes' fast path ---------------------------------------------------------------
@@ -104,9 +92,6 @@ def clear() -> None:
 _ROUTES = re.compile(r"/explorations/([1-9][0-9]{0,9})/(?:best|manifolds(?:/[^/]+)?)")
 _MAX_ID = 2**31 - 1
 _noted: ContextVar[list[Any] | None] = ContextVar("graspscape_kept_versions", default=None)
-_routes: OrderedDict[Hashable, Kept] = OrderedDict()
-_routes_held = [0]
-hits = [0]  # answers served by the fast path (tests; a counter is cheaper than a metric)
 
 
 @dataclass(frozen=True)
@@ -142,17 +127,6 @@ def _read_version(engine: Engine, url: str, exploration_id: int) -> tuple[Any, .
     return None if row is None else (url, exploration_id, *row)
 
 
-def _keep_route(key: Hashable, kept: Kept) -> None:
-    with _lock:
-        old = _routes.pop(key, None)
-        if old is not None:
-            _routes_held[0] -= len(old.body)
-        _routes[key] = kept
-        _routes_held[0] += len(kept.body)
-        while _routes and (len(_routes) > CACHED_ANSWERS or _routes_held[0] > CACHED_BYTES):
-            _routes_held[0] -= len(_routes.popitem(last=False)[1].body)
-
-
 class KeptRoutes:
     """ASGI middleware: kept answers of /best, /manifolds and /manifolds/{label} served before
     FastAPI's routing and validation (see above); everything else passes through."""
@@ -174,26 +148,24 @@ class KeptRoutes:
             self._url = (engine, str(engine.url))
         url = self._url[1]
         key = (url, scope["path"], scope["query_string"])
-        with _lock:
-            kept = _routes.get(key)
-            if kept is not None:
-                _routes.move_to_end(key)
+        state: CoordinatorState = scope["app"].state.coordinator
+        kept = state.routes.get(key)
         if kept is not None:
             try:
                 now = await anyio.to_thread.run_sync(_read_version, engine, url, exploration_id)
             except Exception:  # the store's error is FastAPI's to answer, as on any request
                 now = None
             if now == kept.version:
-                hits[0] += 1
+                state.route_hits += 1
                 scope["route"] = kept.route
                 await send({"type": "http.response.start", "status": 200,
                             "headers": kept.headers})
                 await send({"type": "http.response.body", "body": kept.body})
                 return
-        await self._answer_and_keep(scope, receive, send, key)
+        await self._answer_and_keep(scope, receive, send, key, state)
 
     async def _answer_and_keep(self, scope: Scope, receive: Receive, send: Send,
-                               key: Hashable) -> None:
+                               key: Hashable, state: CoordinatorState) -> None:
         noted: list[Any] = []
         start: Message | None = None
         chunks: list[bytes] = []
@@ -217,5 +189,5 @@ class KeptRoutes:
         # answer for as long as that version stands.
         if (start is not None and start["status"] == 200 and complete and len(noted) == 1
                 and _settled(noted[0]) and not start.get("trailers")):
-            _keep_route(key, Kept(noted[0], scope.get("route"), tuple(start["headers"]),
-                                  b"".join(chunks)))
+            state.routes.put(key, Kept(noted[0], scope.get("route"),
+                                       tuple(start["headers"]), b"".join(chunks)))

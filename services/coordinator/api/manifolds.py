@@ -35,6 +35,7 @@ from graspscape.services.coordinator.manifolds.table import (
     table_document,
 )
 from graspscape.services.coordinator.maps.stored import draw_finished_maps_ahead
+from graspscape.services.coordinator.state import of
 from pydantic import BaseModel, ConfigDict, Field
 
 router = APIRouter(tags=["manifolds"], route_class=FiniteJSONRoute)
@@ -144,9 +145,10 @@ def _json(content: bytes) -> Response:
 
 @router.get("/explorations/{exploration_id}/manifolds", response_model=ManifoldList,
             responses=_NOT_FOUND, summary="The behavioral manifolds, largest first")
-def list_manifolds(exploration_id: Id, session: SessionDep) -> Any:
+def list_manifolds(exploration_id: Id, session: SessionDep, request: Request) -> Any:
     key = (answers.version(session, exploration_id), "manifolds")
-    return _json(answers.answer(key, lambda: _manifolds_body(session, exploration_id)))
+    return _json(answers.answer(key, lambda: _manifolds_body(session, exploration_id),
+                                of(request.app).answers))
 
 
 def _manifolds_body(session: Any, exploration_id: int) -> bytes:
@@ -166,7 +168,8 @@ def _manifolds_body(session: Any, exploration_id: int) -> bytes:
 
 @router.get("/explorations/{exploration_id}/manifolds/{label}", response_model=ManifoldSummary,
             responses=_NOT_FOUND, summary="One manifold by its label")
-def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
+def get_manifold(exploration_id: Id, label: Label, session: SessionDep,
+                 request: Request) -> Any:
     number = _label_number(label)
 
     def body() -> bytes:
@@ -176,7 +179,7 @@ def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
         return items[0].summary.encode()
 
     key = (answers.version(session, exploration_id), "manifold", number)
-    return _json(answers.answer(key, body))
+    return _json(answers.answer(key, body, of(request.app).answers))
 
 
 @router.get(
@@ -189,6 +192,7 @@ def get_manifold(exploration_id: Id, label: Label, session: SessionDep) -> Any:
 def best(
     exploration_id: Id,
     session: SessionDep,
+    request: Request,
     manifold: Annotated[str | None, Query(pattern=_LABEL)] = None,
     cone_x: Annotated[float | None, Query(allow_inf_nan=False, ge=-1e6, le=1e6,
                                           description="approach-cone axis (object frame)")] = None,
@@ -248,7 +252,7 @@ def best(
         session, exploration_id, manifold=manifold, axis=axis,
         cone_half_angle_deg=cone_half_angle_deg, max_effort_nm=max_effort_nm, limit=limit,
         rank=rank, pose_error_mm=pose_error_mm, pose_error_deg=pose_error_deg,
-        engines=asked)))
+        engines=asked), of(request.app).answers))
 
 
 def _best_body(session: Any, exploration_id: int, *, manifold: str | None,

@@ -37,6 +37,7 @@ from graspscape.services.coordinator.dispatch.refusals import failed_reply
 from graspscape.services.coordinator.dispatch.sessions import WorkerSessions
 from graspscape.services.coordinator.errors import WorkerIdTaken
 from graspscape.services.coordinator.settings import Settings
+from graspscape.services.coordinator.state import current
 from graspscape.shared.heap import freeze_startup_heap
 from graspscape.shared.wire import keys
 from graspscape.shared.wire.codec import batch_header, decode_as, encode, error
@@ -86,6 +87,9 @@ class Dispatcher:
         backend = sessions.kw["bind"].dialect.name if sessions.kw.get("bind") else ""
         self._store_turn = threading.Lock() if backend == "sqlite" else contextlib.nullcontext()
         self._users_dir: Path | None = None  # the dictionary made from user + password
+        # Its threads are started through the coordinator's state (state.py), which joins
+        # them at its close and runs them with itself current (the specs, the keeper).
+        self._state = current()
 
     # -- lifecycle -----------------------------------------------------------------------
 
@@ -112,8 +116,7 @@ class Dispatcher:
         except Exception as exc:
             self.counters.errors.labels("session", "open").inc()
             log.error("zenoh session could not open (%s); retrying in the background", exc)
-            retry = threading.Thread(target=self._retry_open, name="dispatch-open", daemon=True)
-            retry.start()
+            retry = self._state.start_thread(self._retry_open, name="dispatch-open", daemon=True)
             self._threads.append(retry)
 
     def _retry_open(self) -> None:
@@ -162,13 +165,10 @@ class Dispatcher:
             ("dispatch-ingest", self._queues["results"], self.zenoh_settings.handler_threads),
             ("dispatch-lease", self._queues["lease"], self.zenoh_settings.lease_threads),
         ):
-            pool = [threading.Thread(target=self._serve, args=(work,), name=name, daemon=True)
+            pool = [self._state.start_thread(self._serve, args=(work,), name=name, daemon=True)
                     for _ in range(count)]
-            for thread in pool:
-                thread.start()
             self._pools.append((work, pool))
-        watcher = threading.Thread(target=self._watch_lost, name="dispatch-lost", daemon=True)
-        watcher.start()
+        watcher = self._state.start_thread(self._watch_lost, name="dispatch-lost", daemon=True)
         self._threads.append(watcher)
         s = self._session
         self._declared = [
@@ -179,8 +179,8 @@ class Dispatcher:
             # history: tokens of workers that were there before this coordinator started.
             s.liveliness().declare_subscriber(keys.ALIVE_ALL, self._on_alive, history=True),
         ]
-        sweeper = threading.Thread(target=self._orphan_sweep, name="dispatch-orphans", daemon=True)
-        sweeper.start()
+        sweeper = self._state.start_thread(self._orphan_sweep, name="dispatch-orphans",
+                                           daemon=True)
         self._threads.append(sweeper)
         freeze_startup_heap()
         log.info(

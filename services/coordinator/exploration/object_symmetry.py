@@ -1,24 +1,20 @@
 """The symmetries of an exploration's object and the lattice orbits they make, cached.
 
 Detecting symmetries samples the mesh (a fraction of a second); orbits enumerate the
-lattice. Both are kept per process: the scheduler asks for them on every batch of an
-exploration with the symmetry shortcut.
+lattice. Both are kept on the coordinator's state (state.py): the scheduler asks for them on
+every batch of an exploration with the symmetry shortcut.
 """
 
 from __future__ import annotations
-
-from typing import Any
 
 from graspscape.services.coordinator.exploration import symmetry
 from graspscape.services.coordinator.exploration.samples import lattice_of
 from graspscape.services.coordinator.exploration.symmetry import Orbits
 from graspscape.services.coordinator.objects.geometry import object_mesh
+from graspscape.services.coordinator.state import current
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.gripper import load_gripper
 from sqlalchemy.orm import Session
-
-_DETECTED: dict[int, tuple[Any, list[symmetry.Symmetry]]] = {}
-_ORBITS: dict[tuple[str, tuple[symmetry.Symmetry, ...]], Orbits] = {}
 
 
 def object_symmetries(session: Session, spec: ExplorationSpec) -> list[symmetry.Symmetry]:
@@ -30,9 +26,11 @@ def object_symmetries(session: Session, spec: ExplorationSpec) -> list[symmetry.
         return []
     # object_mesh caches one mesh per object spec; keyed by identity, the entry keeps the
     # mesh alive so its id is never reused for another object.
-    if id(mesh) not in _DETECTED:
-        _DETECTED[id(mesh)] = (mesh, symmetry.detect(mesh))
-    return symmetry.task_symmetries(_DETECTED[id(mesh)][1], load_gripper(spec.gripper))
+    detected = current().symmetries
+    found = detected.get(id(mesh))
+    if found is None:
+        found = detected.put(id(mesh), (mesh, symmetry.detect(mesh)))
+    return symmetry.task_symmetries(found[1], load_gripper(spec.gripper))
 
 
 def resolve_grid(session: Session, spec: ExplorationSpec) -> ExplorationSpec:
@@ -55,10 +53,13 @@ def symmetry_orbits(session: Session | None, spec: ExplorationSpec) -> Orbits | 
     found = tuple(object_symmetries(session, spec))
     if not found:
         return None
+    orbits = current().orbits
     key = (spec.model_dump_json(), found)
-    if key not in _ORBITS:
-        _ORBITS[key] = symmetry.Orbits(lattice_of(spec), list(found))
-    return _ORBITS[key]
+    kept = orbits.get(key)
+    if kept is None:
+        kept = orbits.put(key, symmetry.Orbits(lattice_of(spec), list(found)))
+    result: Orbits = kept
+    return result
 
 
 def hand_mirror(spec: ExplorationSpec) -> symmetry.HandMirror | None:

@@ -17,13 +17,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from datetime import datetime
+from typing import Literal
 
 from graspscape.services.coordinator.exploration.planning import schedule
 from graspscape.services.coordinator.exploration.specs import stored_spec
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Stage
 from graspscape.services.coordinator.exploration.strategies.registry import strategy_for
 from graspscape.services.coordinator.exploration.tiling import TilePlan
-from graspscape.services.coordinator.manifolds.keeper import KEEPER, Keeper
+from graspscape.services.coordinator.manifolds.keeper import Keeper, current_keeper
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.ingest import IngestReport, StoredBatch, store_batch
 from graspscape.services.coordinator.store.models import (
@@ -62,11 +63,12 @@ def ingest_results(
     results: Sequence[PoseResult],
     final: bool = True,
     now: datetime | None = None,
-    keeper: Keeper | None = KEEPER,
+    keeper: Keeper | Literal["current"] | None = "current",
 ) -> IngestReport:
     """Store a batch of results of one tile (store/ingest.store_batch: with `final`, the tile
     is finished once every pose of it is stored), let the strategy react, commit; then the
-    `keeper`'s turn, in a transaction of its own (None: the table is left as it is).
+    `keeper`'s turn, in a transaction of its own ("current": the coordinator's keeper,
+    `keeper.current_keeper`; None: the table is left as it is).
 
     Raises what store_batch raises (NotFound, NotLeaseHolder, InvalidInput); a refused batch
     stores nothing."""
@@ -83,6 +85,8 @@ def ingest_results(
         after_batch(session, stored, results, now)
     session.commit()  # nothing left to commit when the store did
     if keeper is not None and stored.exploration_status is not None:
+        if keeper == "current":
+            keeper = current_keeper()
         try:
             keeper.keep(session, stored.exploration_id)
         except Exception:  # the batch is committed: its Ack must not wait on the table

@@ -167,9 +167,9 @@ def cancel_exploration(session: Session, *, exploration_id: int) -> ExplorationR
     explorations.cancel(row, now)
     session.commit()
     # The table of what was stored, final: the keeper's, as after a finishing batch.
-    from graspscape.services.coordinator.manifolds.keeper import KEEPER
+    from graspscape.services.coordinator.manifolds.keeper import current_keeper
 
-    KEEPER.keep(session, exploration_id)
+    current_keeper().keep(session, exploration_id)
     return row
 
 

@@ -241,4 +241,9 @@ def _behind(session: Session, exploration_id: int) -> Behind | None:
     return Behind(False, lag, at, *lease) if lag > 0 and lag >= due_after(at) else None
 
 
-KEEPER = Keeper()  # the process's keeper (the coordinator's, the local runner's)
+def current_keeper() -> Keeper:
+    """The keeper of the coordinator in use: the app's, else the process's (the local
+    runner's): its state's `keeper` (services/coordinator/state.py)."""
+    from graspscape.services.coordinator.state import current
+
+    return current().keeper

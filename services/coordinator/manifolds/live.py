@@ -81,6 +81,10 @@ class MapCache:
         with self._lock:
             self._states.clear()
 
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._states)
+
 
 def _new_rows(session: Session, exploration_id: int, lattice: Lattice,
               after_id: int) -> tuple[dict[Point, StoredPose], int, int]:

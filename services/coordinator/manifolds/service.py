@@ -3,12 +3,12 @@
 `refresh_manifolds` brings the exploration's manifold rows, the poses' manifold column and
 robust scores up to date and notes on the exploration row when (poses done, final); the
 keeper (manifolds/keeper.py) runs it after committed batches, throttled, and once more,
-final, when the exploration completes; reads never run it. The map is the process's
-running map of the exploration (`MAPS`, manifolds/live.py and running.py): a refresh reads
-the rows stored since the last one, updates what they change and writes only that, so its
-cost follows the new poses, not the map. The object mesh is
-needed only for volumes (surface radius along each approach direction); it is prepared once
-per process and object (`objects.geometry`).
+final, when the exploration completes; reads never run it. The map is the coordinator's
+running map of the exploration (its state's `maps`: state.py; manifolds/live.py and
+running.py): a refresh reads the rows stored since the last one, updates what they change and
+writes only that, so its cost follows the new poses, not the map. The object mesh is needed
+only for volumes (surface radius along each approach direction); it is prepared once per
+coordinator and object (`objects.geometry`).
 The best grasps (/best and its evidence) are read in manifolds/best.py.
 """
 
@@ -30,7 +30,6 @@ from graspscape.services.coordinator.manifolds.grouping import (
     surface_radii,
 )
 from graspscape.services.coordinator.manifolds.live import (
-    MapCache,
     MapState,
     feed,
     fine_labels_of,
@@ -45,6 +44,7 @@ from graspscape.services.coordinator.mapspace.lattice import Lattice, Point
 from graspscape.services.coordinator.mapspace.samples import lattice_of
 from graspscape.services.coordinator.mapspace.specs import spec_of
 from graspscape.services.coordinator.objects.geometry import object_mesh
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store import explorations
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -59,9 +59,6 @@ from sqlalchemy.orm import Session
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
 FALLBACK_RADIUS_M = FALLBACK_RADIUS
-# The running maps of the explorations this process refreshes (the coordinator's, the local
-# runner's): after a restart the first refresh reads the whole map once.
-MAPS = MapCache()
 
 
 def radius_function(mesh: Any | None) -> Any:
@@ -121,7 +118,7 @@ def _state(session: Session, exploration_id: int
     url = str(session.get_bind().url)
     key = (url, exploration_id, row.created_at)
     folder = snapshot.directory(url)
-    return row, MAPS.get(key, fresh, lambda: snapshot.load(folder, key)), fresh
+    return row, current().maps.get(key, fresh, lambda: snapshot.load(folder, key)), fresh
 
 
 def compute_map(

@@ -12,8 +12,9 @@ one rebuild, never a wrong table; one written by other code (a digest of the mod
 objects it holds: `code_version`) is not loaded at all.
 
 Where: the directory in GRASPSCAPE_MANIFOLD_SNAPSHOTS, else, for a SQLite file, a directory
-beside it (`<database>.manifold-maps`), else the folder the coordinator configured at start
-(`configure`: `<database.data_dir>/manifold-maps`, a volume in docker-compose); none (no
+beside it (`<database>.manifold-maps`), else the coordinator's folder
+(its state's `snapshot_dir`, which `create_app` sets to `<database.data_dir>/manifold-maps`, a
+volume in docker-compose: state.py); none (no
 snapshots) where nothing applies, e.g. a PostgreSQL store used outside a coordinator.
 Files are written whole (a temporary file, then renamed) and are the coordinator's own: they
 are unpickled, so the directory must not be writable by anyone else. Deleting an exploration
@@ -34,6 +35,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from graspscape.services.coordinator.manifolds.live import MapState
+from graspscape.services.coordinator.state import current
 
 log = logging.getLogger("graspscape.coordinator.manifolds")
 
@@ -70,16 +72,6 @@ def code_version() -> str:
     return digest.hexdigest()[:16]
 
 
-_configured: Path | None = None
-
-
-def configure(folder: Path | None) -> None:
-    """The folder for stores that are not a SQLite file, set once by the coordinator at start
-    from its settings (database.data_dir)."""
-    global _configured
-    _configured = folder
-
-
 def directory(url: str) -> Path | None:
     """Where this database's snapshots go (see the module docstring), or None."""
     given = os.environ.get(ENV)
@@ -87,7 +79,7 @@ def directory(url: str) -> Path | None:
         return Path(given)
     if url.startswith("sqlite:///") and not url.endswith(":memory:") and len(url) > 10:
         return Path(url[len("sqlite:///"):] + ".manifold-maps")
-    return _configured
+    return current().snapshot_dir
 
 
 def _path(folder: Path, key: Hashable) -> Path:

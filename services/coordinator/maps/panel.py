@@ -18,23 +18,18 @@ before. SVG is not concerned (vector output).
 from __future__ import annotations
 
 import math
-import threading
-from collections import OrderedDict
 from collections.abc import Hashable
 from typing import Any
 
 import numpy as np
-
-KEPT_PANELS = 8  # ~1.6 MB each at 1320 × 616 pixels
-_kept: OrderedDict[tuple[object, ...], np.ndarray] = OrderedDict()
-_lock = threading.Lock()
-stats = {"drawn": 0, "reused": 0}  # tests and benchmarks: what the panel cost
+from graspscape.services.coordinator.state import current
 
 
 def reuse_panel(cut_axes: Any, panel: Any, key: Hashable) -> None:
     """Make `panel` (the 3D axes) draw from kept pixels where exact; `key`: the map version
     (what the panel shows)."""
     draw = panel.draw
+    state = current()  # its `panels` (~1.6 MB each at 1320 × 616 pixels), its `panel_stats`
 
     def kept_draw(renderer: Any) -> None:
         buf = np.asarray(renderer.buffer_rgba())
@@ -48,26 +43,19 @@ def reuse_panel(cut_axes: Any, panel: Any, key: Hashable) -> None:
         place = (key, buf.shape, tuple(box.bounds))
         region = buf[:, x0:]
         blank = bool((region == 255).all())
-        with _lock:
-            found = _kept.get(place) if blank else None
-            if found is not None:
-                _kept.move_to_end(place)
-                stats["reused"] += 1
+        found = state.panels.get(place) if blank else None
         if found is not None:
+            state.panel_stats["reused"] += 1
             region[...] = found
             return
         left = buf[:, :x0].copy() if blank else None
         draw(renderer)
-        stats["drawn"] += 1
+        state.panel_stats["drawn"] += 1
         if left is not None and np.array_equal(buf[:, :x0], left):
-            with _lock:
-                _kept[place] = region.copy()
-                while len(_kept) > KEPT_PANELS:
-                    _kept.popitem(last=False)
+            state.panels.put(place, region.copy())
 
     panel.draw = kept_draw
 
 
 def clear() -> None:
-    with _lock:
-        _kept.clear()
+    current().panels.clear()

@@ -9,9 +9,10 @@ refresh, are drawn ahead and stored (maps/stored.py), so their first read in a p
 row read while the version matches.
 
 What a picture is drawn from — the poses' arrays and the manifold table, ~0.2 s of reading at
-100k poses and seconds at 1M — is kept for the last INPUT_VERSIONS map versions, so another
-cut, φ0, r or attitude of the same version reads nothing again (nor derives its directions,
-trees and 3D markers again: maps/derived.py); and one drawing per picture at a time: a request
+100k poses and seconds at 1M — is kept for the last two map versions (the coordinator
+state's `picture_inputs`: state.py), so another cut, φ0, r or attitude of the same version
+reads nothing again (nor derives its directions, trees and 3D markers again:
+maps/derived.py); and one drawing per picture at a time: a request
 for a picture being drawn waits for it instead of drawing it too (the 8 clients of one page ask
 for the same picture at once), and the default picture waits for its draw-ahead in flight.
 When a stored default picture is served and its version's inputs are not kept (a restart,
@@ -25,7 +26,7 @@ import json
 import logging
 import math
 import threading
-from collections import OrderedDict
+from collections.abc import Hashable
 from pathlib import Path
 from typing import Any, Literal
 
@@ -33,18 +34,14 @@ from graspscape.services.coordinator.errors import InvalidInput, NotFound
 from graspscape.services.coordinator.exploration.lattice import Lattice
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
 from graspscape.services.coordinator.maps.points import MapPoints
+from graspscape.services.coordinator.state import Bounded, current
 from graspscape.services.coordinator.store.models import ExplorationRow
 from sqlalchemy.orm import Session
 
 Cut = Literal["horizontal", "vertical"]
-CACHED_PICTURES = 16
-INPUT_VERSIONS = 2  # a 1M-pose map's arrays are ~60 MB
-_cache: OrderedDict[tuple[object, ...], tuple[bytes, int, int]] = OrderedDict()
-_inputs: OrderedDict[tuple[object, ...], tuple[MapPoints, list[ManifoldSummary]]] = OrderedDict()
-_lock = threading.Lock()  # the two caches and _drawing, across the server's threads
-_drawing: dict[tuple[object, ...], threading.Lock] = {}
-_reading: dict[tuple[object, ...], threading.Lock] = {}  # versions whose inputs are being read
-_ahead: dict[tuple[object, ...], threading.Thread] = {}  # read_ahead threads in flight
+# The state's `drawing`, `reading` (versions whose inputs are being read) and `reading_ahead`
+# (read_ahead threads in flight), across the server's threads; its caches lock themselves.
+_lock = threading.Lock()
 log = logging.getLogger("graspscape.coordinator.maps")
 
 
@@ -98,12 +95,13 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
         title = f"{spec.label or ''}".strip()
     version = _version(session, row)
     key = (*version, fmt, cut, phi0_deg, attitude, title, r_level)
-    if (found := _kept(key)) is not None:
+    state = current()
+    if (found := state.pictures.get(key)) is not None:
         return found
     with _lock:
-        drawing = _drawing.setdefault(key, threading.Lock())
+        drawing = state.drawing.setdefault(key, threading.Lock())
     with drawing:  # one drawing of a picture at a time; the others then find it kept
-        if (found := _kept(key)) is not None:
+        if (found := state.pictures.get(key)) is not None:
             return found
         try:
             # The default picture, drawn ahead (maps/stored.py).
@@ -114,17 +112,17 @@ def picture_bytes(session: Session, exploration_id: int, fmt: Literal["png", "sv
                 # starts now, in the background, not at the next request.
                 read_ahead(session.get_bind(), version, exploration_id, lattice, row.object_id,
                            version_text(row))
-                return _keep(key, stored)
+                return state.pictures.put(key, stored)
             points, manifolds = _drawn_from(session, version, exploration_id, lattice,
                                             version_text(row))
             data = render_map(lattice, points, manifolds, object_mesh(session, row.object_id),
                               cut=cut, phi0=math.radians(phi0_deg), attitude=attitude,
                               fmt=fmt, title=title, r_level=r_level, panel_key=version,
                               table=table_of(spec))
-            return _keep(key, (data, len(manifolds), len(points)))
+            return state.pictures.put(key, (data, len(manifolds), len(points)))
         finally:
             with _lock:
-                _drawing.pop(key, None)
+                state.drawing.pop(key, None)
 
 
 def table_of(spec: Any) -> tuple[Any, float] | None:
@@ -156,22 +154,6 @@ def version_points(session: Session, exploration_id: int) -> MapPoints:
                        lattice_of(spec_of(row)), version_text(row))[0]
 
 
-def _kept(key: tuple[object, ...]) -> tuple[bytes, int, int] | None:
-    with _lock:
-        found = _cache.get(key)
-        if found is not None:
-            _cache.move_to_end(key)
-        return found
-
-
-def _keep(key: tuple[object, ...], value: tuple[bytes, int, int]) -> tuple[bytes, int, int]:
-    with _lock:
-        _cache[key] = value
-        while len(_cache) > CACHED_PICTURES:
-            _cache.popitem(last=False)
-    return value
-
-
 def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: int,
                 lattice: Lattice, stored_version: str) -> tuple[MapPoints, list[ManifoldSummary]]:
     """The poses' arrays and the manifold table at `version`, read once per version: a
@@ -182,29 +164,23 @@ def _drawn_from(session: Session, version: tuple[object, ...], exploration_id: i
     from graspscape.services.coordinator.maps.points import stored_points
     from graspscape.services.coordinator.maps.stored import stored_points_at
 
+    state = current()
+    inputs: Bounded[Hashable, tuple[MapPoints, list[ManifoldSummary]]] = state.picture_inputs
+    if (found := inputs.get(version)) is not None:
+        return found
     with _lock:
-        found = _inputs.get(version)
-        if found is not None:
-            _inputs.move_to_end(version)
-            return found
-        reading = _reading.setdefault(version, threading.Lock())
+        reading = state.reading.setdefault(version, threading.Lock())
     with reading:
-        with _lock:
-            found = _inputs.get(version)
-        if found is not None:
+        if (found := inputs.peek(version)) is not None:
             return found
         try:
             points = stored_points_at(session, exploration_id, stored_version, lattice)
             if points is None:
                 points = stored_points(session, exploration_id, lattice)
-            found = (points, stored_manifolds(session, exploration_id))
-            with _lock:
-                _inputs[version] = found
-                while len(_inputs) > INPUT_VERSIONS:
-                    _inputs.popitem(last=False)
+            found = inputs.put(version, (points, stored_manifolds(session, exploration_id)))
         finally:
             with _lock:
-                _reading.pop(version, None)
+                state.reading.pop(version, None)
     return found
 
 
@@ -214,14 +190,16 @@ def read_ahead(bind: Any, version: tuple[object, ...], exploration_id: int, latt
     attitude 0's tree, the 3D view's markers) in a background thread, unless kept or being
     read: at 1M poses that is ~3 s of the first cut's ~4 s, paid while the viewer looks at
     the default picture. Not a daemon (a stop waits for it, as for the draw-aheads)."""
+    state = current()
     with _lock:
-        if version in _inputs or version in _reading or version in _ahead:
+        if (version in state.picture_inputs or version in state.reading
+                or version in state.reading_ahead):
             return None
-        thread = threading.Thread(target=_read_ahead, name=f"map-read-{exploration_id}",
-                                  args=(bind, version, exploration_id, lattice, object_id,
-                                        stored_version))
-        _ahead[version] = thread
-    thread.start()
+        # Started under the lock (its end waits for it) so that it is noted before it ends.
+        thread = state.start_thread(_read_ahead, name=f"map-read-{exploration_id}",
+                                    args=(bind, version, exploration_id, lattice, object_id,
+                                          stored_version))
+        state.reading_ahead[version] = thread
     return thread
 
 
@@ -242,13 +220,13 @@ def _read_ahead(bind: Any, version: tuple[object, ...], exploration_id: int, lat
                     exc_info=True)
     finally:
         with _lock:
-            _ahead.pop(version, None)
+            current().reading_ahead.pop(version, None)
 
 
 def wait_read_ahead(timeout: float = 120.0) -> None:
     """Wait for the reads ahead in flight (tests, benchmarks)."""
     with _lock:
-        threads = list(_ahead.values())
+        threads = list(current().reading_ahead.values())
     for thread in threads:
         thread.join(timeout)
 

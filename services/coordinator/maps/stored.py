@@ -9,7 +9,9 @@ commit that notes its manifold table final (`draw_finished_maps_ahead`: a listen
 `map_pictures` with the map version it was drawn at. `picture_bytes` serves that row when the
 version still matches, in any coordinator process, also after a restart. Pictures with other
 parameters, and those of running explorations (whose version moves with every ingested
-batch), are drawn on read and kept in the process's memory (maps/picture.py).
+batch), are drawn on read and kept in the coordinator's memory (maps/picture.py). The
+background threads are started through the coordinator's state, which joins them at its close
+(state.py).
 
 A running map's default picture is drawn ahead too, after the commit of a manifold refresh
 (a listener on `explorations.manifolds_poses_done`) and stored the same way: a read between
@@ -43,6 +45,7 @@ from typing import Any
 
 from graspscape.services.coordinator.exploration.lattice import Lattice
 from graspscape.services.coordinator.maps.points import MapPoints
+from graspscape.services.coordinator.state import CoordinatorState, current
 from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
 from sqlalchemy import delete, event, select
 from sqlalchemy.orm import Session, object_session
@@ -54,11 +57,10 @@ RUNNING_DRAW_INTERVAL_S = 30.0
 # And no more often than keeps a running map's draws under this share of the coordinator's
 # time: at 1M poses a draw reads a million rows (~15 s), every 30 s would be half a core.
 RUNNING_DRAW_SHARE = 0.1
+# The state's draw-ahead book (state.py): `drawing_ahead` (the threads in flight),
+# `draw_again` (asked for while its draw was in flight), `last_running_draw` (monotonic start
+# of a running map's last one), `draw_seconds` (how long the last draw-ahead took).
 _lock = threading.Lock()
-_running: dict[tuple[str, int], threading.Thread] = {}
-_again: set[tuple[str, int]] = set()  # asked for while its draw was in flight
-_last_running_draw: dict[tuple[str, int], float] = {}  # monotonic start of the last one
-_draw_seconds: dict[tuple[str, int], float] = {}  # how long the last draw-ahead took
 
 
 def default_title(exploration_id: int) -> str:
@@ -146,12 +148,13 @@ def _render(bind: Any, exploration_id: int, key: tuple[str, int]) -> None:
         except Exception:  # a background job: say so, the read renders on demand instead
             log.warning("exploration %s: the map picture was not drawn ahead", exploration_id,
                         exc_info=True)
+        state = current()
         with _lock:
-            _draw_seconds[key] = time.monotonic() - start
-            if key not in _again:
-                _running.pop(key, None)
+            state.draw_seconds[key] = time.monotonic() - start
+            if key not in state.draw_again:
+                state.drawing_ahead.pop(key, None)
                 return
-            _again.discard(key)
+            state.draw_again.discard(key)
 
 
 def prerender_after_commit(session: Session, exploration_id: int, poses: int) -> None:
@@ -163,15 +166,16 @@ def prerender_after_commit(session: Session, exploration_id: int, poses: int) ->
     bind = session.get_bind()
     key = (str(bind.url), exploration_id)
 
+    state = current()  # the commit may come in another context: the state is the writer's
+
     def start(_session: Session) -> None:
         with _lock:
-            if key in _running:
-                _again.add(key)
+            if key in state.drawing_ahead:
+                state.draw_again.add(key)
                 return
-            thread = threading.Thread(target=_render, args=(bind, exploration_id, key),
-                                      name=f"map-picture-{exploration_id}")
-            _running[key] = thread
-        thread.start()
+            # Started under the lock (its end waits for it): noted before it can end.
+            state.drawing_ahead[key] = state.start_thread(
+                _render, args=(bind, exploration_id, key), name=f"map-picture-{exploration_id}")
 
     event.listen(session, "after_commit", start, once=True)
 
@@ -179,7 +183,7 @@ def prerender_after_commit(session: Session, exploration_id: int, poses: int) ->
 def in_flight(bind: Any, exploration_id: int) -> threading.Thread | None:
     """The thread drawing this exploration's default picture ahead, if one is."""
     with _lock:
-        return _running.get((str(bind.url), exploration_id))
+        return current().drawing_ahead.get((str(bind.url), exploration_id))
 
 
 def _final_set(target: ExplorationRow, value: object, _old: object, _initiator: object) -> None:
@@ -197,11 +201,12 @@ def _refreshed(target: ExplorationRow, value: object, old: object, _initiator: o
         return
     key = (str(session.get_bind().url), target.id)
     now = time.monotonic()
+    state = current()
     with _lock:
-        wait = max(RUNNING_DRAW_INTERVAL_S, _draw_seconds.get(key, 0.0) / RUNNING_DRAW_SHARE)
-        if now - _last_running_draw.get(key, -math.inf) < wait:
+        wait = max(RUNNING_DRAW_INTERVAL_S, state.draw_seconds.get(key, 0.0) / RUNNING_DRAW_SHARE)
+        if now - state.last_running_draw.get(key, -math.inf) < wait:
             return
-        _last_running_draw[key] = now
+        state.last_running_draw[key] = now
     prerender_after_commit(session, target.id, target.poses_done or 0)
 
 
@@ -217,21 +222,21 @@ def draw_finished_maps_ahead() -> None:
         event.listen(ExplorationRow.manifolds_poses_done, "set", _refreshed)
 
 
-def start_warm_up() -> threading.Thread:
-    """Draw a first picture in the background (`render.warm_up`); the app's lifespan starts
-    it and joins it at shutdown. Not at import, and not a daemon: a process that exited while
-    a daemon thread was inside matplotlib aborted ("terminate called without an active
+def start_warm_up(state: CoordinatorState) -> threading.Thread | None:
+    """Draw a first picture in the background (`render.warm_up`), through the app's state,
+    whose close joins it. Not at import, and not a daemon: a process that exited while a
+    daemon thread was inside matplotlib aborted ("terminate called without an active
     exception", 2 of 10 bare `pytest` collections when it was started at import). Once per
-    process: a later app gets the same thread."""
-    global _warm_up_thread
+    process (matplotlib's first use is the process's): a later app starts none."""
     with _lock:
-        if _warm_up_thread is None:
-            _warm_up_thread = threading.Thread(target=_warm_up, name="map-picture-warm-up")
-            _warm_up_thread.start()
-        return _warm_up_thread
+        if _warmed.is_set():
+            return None
+        _warmed.set()
+        return state.start_thread(_warm_up, name="map-picture-warm-up")
 
 
-_warm_up_thread: threading.Thread | None = None
+# Set once a warm-up has started in this process: a fact about the process, not an app's state.
+_warmed = threading.Event()
 
 
 def _warm_up() -> None:
@@ -246,6 +251,6 @@ def _warm_up() -> None:
 def wait_prerendered(timeout: float = 120.0) -> None:
     """Wait for the pictures being drawn ahead (tests, benchmarks)."""
     with _lock:
-        threads = list(_running.values())
+        threads = list(current().drawing_ahead.values())
     for thread in threads:
         thread.join(timeout)

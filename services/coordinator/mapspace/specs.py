@@ -1,4 +1,5 @@
-"""The stored exploration spec, parsed once per process: the one cache every reader shares.
+"""The stored exploration spec, parsed once per coordinator (its state's `specs`: state.py):
+the one cache every reader shares.
 
 A spec never changes after submission, and parsing one (a JSON document validated into
 ExplorationSpec, the gripper name checked against the configs) costs more than the work of a
@@ -10,19 +11,16 @@ spec.
 
 from __future__ import annotations
 
-import threading
 from datetime import datetime
 from typing import Any
 
 from graspscape.services.coordinator.errors import NotFound
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import ExplorationRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from sqlalchemy import bindparam, select
 from sqlalchemy.orm import Session
 
-_MAX_CACHED = 256
-_cache: dict[tuple[int, datetime], ExplorationSpec] = {}
-_lock = threading.Lock()  # the dispatcher reads specs from several handler threads
 _ROW = select(ExplorationRow.spec, ExplorationRow.created_at).where(
     ExplorationRow.id == bindparam("id"))
 _SPEC = select(ExplorationRow.spec).where(ExplorationRow.id == bindparam("id"))
@@ -30,9 +28,9 @@ _SPEC = select(ExplorationRow.spec).where(ExplorationRow.id == bindparam("id"))
 
 def _cached(exploration_id: int, created_at: datetime, spec_json: Any | None,
             session: Session | None) -> ExplorationSpec:
+    cache = current().specs  # thread-safe: the dispatcher reads specs from its handler threads
     key = (exploration_id, created_at)
-    with _lock:
-        spec = _cache.get(key)
+    spec = cache.get(key)
     if spec is not None:
         return spec
     if spec_json is None and session is not None:
@@ -40,11 +38,7 @@ def _cached(exploration_id: int, created_at: datetime, spec_json: Any | None,
     if spec_json is None:
         raise NotFound(f"exploration {exploration_id} does not exist")
     spec = ExplorationSpec.model_validate(spec_json, context={"stored": True})
-    with _lock:
-        if len(_cache) >= _MAX_CACHED:
-            _cache.clear()
-        _cache[key] = spec
-    return spec
+    return cache.put(key, spec)
 
 
 def spec_of(row: ExplorationRow) -> ExplorationSpec:

@@ -10,7 +10,6 @@ embedded without it has no mesh: symmetry is not detected and volumes use a fixe
 
 from __future__ import annotations
 
-import functools
 import logging
 import threading
 from collections.abc import Callable
@@ -18,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import ObjectRow
 from graspscape.shared.specs.objects import ObjectSpec
 from sqlalchemy.orm import Session
@@ -37,10 +37,10 @@ _source: MeshSource | None = None
 
 
 def use_mesh_source(source: MeshSource | None) -> None:
-    """Set (or with None, clear) the process's mesh source; the cache is dropped with it."""
+    """Set (or with None, clear) the process's mesh source. The meshes prepared are kept on
+    the coordinator's state (state.py), keyed by the source that prepared them."""
     global _source
     _source = source
-    _mesh_for.cache_clear()
 
 
 def object_spec(row: ObjectRow, cache_dir: Path) -> ObjectSpec:
@@ -63,18 +63,19 @@ def object_spec(row: ObjectRow, cache_dir: Path) -> ObjectSpec:
 MESH_QUERIES = threading.Lock()
 
 
-@functools.lru_cache(maxsize=16)
-def _mesh_for(spec_json: str) -> Any:
-    assert _source is not None
-    return _source.prepare(ObjectSpec.model_validate_json(spec_json))
-
-
 def spec_mesh(spec: ObjectSpec) -> Any:
-    """The mesh of an object spec (prepared once per process and spec)."""
-    if _source is None:
+    """The mesh of an object spec (prepared once per coordinator and spec)."""
+    source = _source
+    if source is None:
         raise LookupError("no mesh source: the coordinator runs without the workers' "
                           "object preparation (graspscape.services.local wires it)")
-    return _mesh_for(spec.model_dump_json())
+    meshes = current().meshes
+    key = (source, spec.model_dump_json())
+    mesh = meshes.get(key)
+    if mesh is None:
+        # Two threads preparing one spec at once keep the first: one mesh object per spec.
+        mesh = meshes.setdefault(key, source.prepare(spec))
+    return mesh
 
 
 def object_mesh(session: Session, object_id: int) -> Any | None:

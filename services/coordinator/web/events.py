@@ -20,6 +20,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import StreamingResponse
 from graspscape.services.coordinator.exploration import service
+from graspscape.services.coordinator.state import of
 from graspscape.services.coordinator.store.base import utcnow
 from graspscape.services.coordinator.store.models import (
     FINISHED_STATUSES,
@@ -36,7 +37,8 @@ router = APIRouter(include_in_schema=False)
 # Set when uvicorn is told to exit. Uvicorn's graceful shutdown waits for every response to
 # end, and an event stream never does: one open viewer tab kept `graspscape serve` from
 # exiting on SIGTERM/Ctrl-C (measured: still up 40 s later). The streams end on this instead.
-# Uvicorn offers no hook for it, so its signal handler is wrapped, as sse-starlette does.
+# Uvicorn offers no hook for it, so its signal handler is wrapped, as sse-starlette does. A
+# fact about the process (its signal), not an app's state; a closed app's streams end too.
 _shutting_down = threading.Event()
 
 
@@ -138,7 +140,7 @@ async def _events(request: Request, interval_s: float, max_events: int | None
             yield ": idle\n\n"
         for _ in range(max(1, round(interval_s / 0.2))):  # wake often enough to end soon
             await asyncio.sleep(min(interval_s, 0.2))
-            if _shutting_down.is_set():
+            if _shutting_down.is_set() or of(request.app).closed.is_set():
                 return
         if await request.is_disconnected():
             return

@@ -39,11 +39,11 @@ import cma
 import numpy as np
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Planned, Stage
 from graspscape.services.coordinator.exploration.strategies.replay_cache import (
-    ReplayCache,
     Told,
     next_replayed_round,
 )
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
@@ -165,14 +165,15 @@ class _Search:
             self.es = self._start()
 
 
-# Searches as the last replay left them, per exploration (strategies/replay_cache.py).
-_SEARCHES: ReplayCache[_Search] = ReplayCache()
+# Searches as the last replay left them, per exploration (strategies/replay_cache.py), kept
+# on the coordinator's state (services/coordinator/state.py).
 
 
 def _resume(cache_key: str | None, spec: ExplorationSpec, g: int,
             quality_of: Callable[[str], float]) -> tuple[_Search, Told]:
-    kept = _SEARCHES.resume(cache_key, g, quality_of,
-                            take=lambda snap: copy.deepcopy(snap.search), pop=False)
+    kept = current().cmaes_searches.resume(cache_key, g, quality_of,
+                                           take=lambda snap: copy.deepcopy(snap.search),
+                                           pop=False)
     if kept is not None:
         return kept
     strategy = spec.strategy
@@ -193,7 +194,7 @@ def generation(spec: ExplorationSpec, g: int, quality_of: Callable[[str], float]
         xs, poses = search.ask()
         if not poses or (before is not None and not all(skip(p.key()) for p in poses)):
             if before is not None:
-                _SEARCHES.keep(cache_key, before, told)
+                current().cmaes_searches.keep(cache_key, before, told)
             return len(told), poses
         keys = [p.key() for p in poses]
         qualities = [quality_of(key) for key in keys]

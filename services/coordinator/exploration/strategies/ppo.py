@@ -46,11 +46,11 @@ from graspscape.services.coordinator.exploration.strategies.ppo_env import (
     reward,
 )
 from graspscape.services.coordinator.exploration.strategies.replay_cache import (
-    ReplayCache,
     Told,
     next_replayed_round,
 )
 from graspscape.services.coordinator.exploration.tiling import TilePlan, group_tiles
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import PoseRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
@@ -186,14 +186,15 @@ def _never(pose: Pose) -> tuple[bool, float, float]:
     raise AssertionError("the scheduler evaluates the ppo strategy's poses, not the env")
 
 
-# Searches as the last replay left them, per exploration (strategies/replay_cache.py). A
+# Searches as the last replay left them, per exploration (strategies/replay_cache.py, on the
+# coordinator's state: services/coordinator/state.py). A
 # resumed search is taken out of the cache while it runs, so no two calls share one.
-_SEARCHES: ReplayCache[_Search] = ReplayCache()
 
 
 def _resume(cache_key: str | None, spec: ExplorationSpec, g: int,
             reward_of: Callable[[str], float]) -> tuple[_Search, Told]:
-    kept = _SEARCHES.resume(cache_key, g, reward_of, take=lambda snap: snap.search, pop=True)
+    kept = current().ppo_searches.resume(cache_key, g, reward_of, take=lambda snap: snap.search,
+                                         pop=True)
     if kept is not None:
         return kept
     strategy = spec.strategy
@@ -215,7 +216,7 @@ def rollout(spec: ExplorationSpec, g: int, reward_of: Callable[[str], float],
         if not poses or (mark is not None and not all(skip(p.key()) for p in poses)):
             if mark is not None:
                 search.restore(mark)
-                _SEARCHES.keep(cache_key, search, told)
+                current().ppo_searches.keep(cache_key, search, told)
             return len(told), poses
         keys = [p.key() for p in poses]
         rewards = [reward_of(key) for key in keys]

@@ -8,13 +8,12 @@ resuming equals replaying. `next_replayed_round` is the scheduler round both exp
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
 
 from graspscape.services.coordinator.exploration.strategies.base import Batch, Planned
+from graspscape.services.coordinator.state import Bounded
 from graspscape.services.coordinator.store.models import PosePlanRow, TileRow
 from graspscape.shared.specs.exploration import ExplorationSpec
 from graspscape.shared.specs.pose import Pose
@@ -45,9 +44,13 @@ class ReplayCache(Generic[S]):
     """The last `kept` searches by cache key (least recently kept dropped first)."""
 
     def __init__(self, kept: int = 16) -> None:
-        self._snapshots: OrderedDict[str, Snapshot[S]] = OrderedDict()
-        self._kept = kept
-        self._lock = threading.Lock()
+        self._snapshots: Bounded[str, Snapshot[S]] = Bounded(kept)
+
+    def clear(self) -> None:
+        self._snapshots.clear()
+
+    def __len__(self) -> int:
+        return len(self._snapshots)
 
     def resume(self, cache_key: str | None, rounds: int, value_of: Callable[[str], float],
                *, take: Callable[[Snapshot[S]], S], pop: bool) -> tuple[S, Told] | None:
@@ -56,9 +59,7 @@ class ReplayCache(Generic[S]):
         cache while it runs (a search too costly to copy); `take` makes the caller's copy."""
         if cache_key is None:
             return None
-        with self._lock:
-            snap = (self._snapshots.pop(cache_key, None) if pop
-                    else self._snapshots.get(cache_key))
+        snap = self._snapshots.pop(cache_key) if pop else self._snapshots.peek(cache_key)
         if snap is None or len(snap.told) > rounds or not all(
                 value_of(key) == v
                 for keys, vs in snap.told for key, v in zip(keys, vs, strict=True)):
@@ -68,11 +69,7 @@ class ReplayCache(Generic[S]):
     def keep(self, cache_key: str | None, search: S, told: Told) -> None:
         if cache_key is None:
             return
-        with self._lock:
-            self._snapshots[cache_key] = Snapshot(search, told)
-            self._snapshots.move_to_end(cache_key)
-            while len(self._snapshots) > self._kept:
-                self._snapshots.popitem(last=False)
+        self._snapshots.put(cache_key, Snapshot(search, told))
 
 
 def next_replayed_round(batch: Batch, spec: ExplorationSpec, search: Search,

@@ -12,6 +12,7 @@ from fastapi.testclient import TestClient
 from graspscape.services.coordinator.api import answers
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.manifolds.service import refresh_manifolds
+from graspscape.services.coordinator.state import of
 from graspscape.services.coordinator.store.queue import lease_tiles
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -37,7 +38,7 @@ def _read(client: TestClient, eid: int) -> list[tuple[int, dict[str, str], bytes
 
 def _computed(client: TestClient, eid: int) -> list[tuple[int, dict[str, str], bytes]]:
     """The answers FastAPI's routes compute, nothing kept."""
-    answers.clear()
+    answers.clear(of(client.app))
     return _read(client, eid)
 
 
@@ -71,44 +72,44 @@ def test_kept_routes_answer_what_fastapi_answers_until_a_write(
 
     # A running map whose table is not final: FastAPI answers every request (its own kept
     # answers), the fast path none.
-    answers.clear()
-    hits = answers.hits[0]
+    answers.clear(of(client.app))
+    hits = of(client.app).route_hits
     running = _read(client, eid)
-    assert _read(client, eid) == running and answers.hits[0] == hits
+    assert _read(client, eid) == running and of(client.app).route_hits == hits
 
     # Settled (the table final at every stored pose): the second read is the fast path's, and
     # is what FastAPI computes, status and headers included.
     _refresh(sessions, eid, final=True)
-    answers.clear()
+    answers.clear(of(client.app))
     settled = _read(client, eid)
-    assert _read(client, eid) == settled and answers.hits[0] == hits + 4
+    assert _read(client, eid) == settled and of(client.app).route_hits == hits + 4
     assert _computed(client, eid) == settled
-    assert _read(client, eid) == settled and answers.hits[0] == hits + 8
+    assert _read(client, eid) == settled and of(client.app).route_hits == hits + 8
     metrics = client.get("/metrics").text
     assert 'route="/explorations/{exploration_id}/best",status="200"} 12.0' in metrics
 
     # A refresh that moves the mark (not final any more): through FastAPI again.
     _refresh(sessions, eid, final=False)
     assert _read(client, eid) == _computed(client, eid)
-    assert answers.hits[0] == hits + 8
+    assert of(client.app).route_hits == hits + 8
 
     # An ingest moves the version: the fast path does not answer the old map's bytes; the
     # keeper refreshed the table after the batch that finished the exploration, FastAPI
     # answers the new map's, which the fast path keeps (settled).
     _refresh(sessions, eid, final=True)
     before = _read(client, eid)
-    assert _read(client, eid) == before and answers.hits[0] == hits + 12
+    assert _read(client, eid) == before and of(client.app).route_hits == hits + 12
     _ingest(sessions, tiles[half:])
     after = _read(client, eid)
-    assert answers.hits[0] == hits + 12
+    assert of(client.app).route_hits == hits + 12
     assert after != before and after[2][2] != before[2][2]  # /manifolds counts the new poses
     assert _computed(client, eid) == after
-    assert _read(client, eid) == after and answers.hits[0] == hits + 16
+    assert _read(client, eid) == after and of(client.app).route_hits == hits + 16
 
     # A deleted exploration: its kept answers are not served (the version read finds no row).
     assert client.delete(f"/explorations/{eid}").status_code in (200, 204)
     assert client.get(_paths(eid)[2]).status_code == 404
-    assert answers.hits[0] == hits + 16
+    assert of(client.app).route_hits == hits + 16
 
 
 def test_a_query_string_is_its_own_key(
@@ -122,15 +123,15 @@ def test_a_query_string_is_its_own_key(
     with sessions() as s:
         tiles = lease_tiles(s, worker_id="w", n=1000, lease_seconds=60)
     _ingest(sessions, tiles)
-    answers.clear()
+    answers.clear(of(client.app))
     base = f"/explorations/{eid}/best"
     one = client.get(f"{base}?limit=1")
     assert one.status_code == 200 and client.get(f"{base}?limit=1").content == one.content
-    hits = answers.hits[0]
+    hits = of(client.app).route_hits
     two = client.get(f"{base}?limit=2")
     assert two.status_code == 200 and len(two.json()["poses"]) == 2
     assert client.get(f"{base}?limit=0").status_code == 422
     assert client.get(f"{base}?limit=0").status_code == 422  # a refusal is never kept
     assert client.get(f"/explorations/{eid}/manifolds/ZZ").status_code == 404
     assert client.get(f"/explorations/{eid}/manifolds/ZZ").status_code == 404
-    assert answers.hits[0] == hits
+    assert of(client.app).route_hits == hits

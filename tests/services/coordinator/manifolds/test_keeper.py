@@ -14,6 +14,7 @@ from graspscape.services.coordinator.exploration.service import (
     create_exploration,
 )
 from graspscape.services.coordinator.manifolds import keeper, service
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -43,7 +44,7 @@ def test_the_keeper_keeps_the_table_within_its_lag_and_final(
     monkeypatch.setattr(keeper, "REFRESH_MIN_POSES", 20)
     monkeypatch.setattr(keeper, "REFRESH_MAX_POSES", 40)
     spec = sphere_grid(named_object, dtheta_deg=30, r_max=0.02, rolls=2)
-    refreshes = keeper.KEEPER.upkeep.refreshes
+    refreshes = keeper.current_keeper().upkeep.refreshes
     with sessions() as s:
         eid = create_exploration(s, spec=spec, tile_target_poses=8, max_poses=10**6).id
         tiles = _leased(s)
@@ -61,11 +62,11 @@ def test_the_keeper_keeps_the_table_within_its_lag_and_final(
         done, at, final = _marks(s, eid)
         assert final and at == done  # the finishing batch waited for the final table
         kept = stored(s, eid)
-        service.MAPS.clear()  # a restarted process: read everything, write it whole
+        current().maps.clear()  # a restarted process: read everything, write it whole
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
         assert stored(s, eid) == kept and len(kept[0]) >= 2
-    assert keeper.KEEPER.upkeep.refreshes > refreshes + 2
+    assert keeper.current_keeper().upkeep.refreshes > refreshes + 2
 
 
 def test_off_lattice_poses_are_kept_apart_and_the_table_current(sessions, named_object) -> None:
@@ -143,10 +144,10 @@ def test_the_sweep_catches_up_a_table_left_behind(sessions, named_object) -> Non
                            results=[oracle_result(p) for p in t.poses()], keeper=None)
         done, at, final = _marks(s, eid)
         assert done > 0 and at is None and not final
-        assert keeper.KEEPER.catch_up(s) >= 1
+        assert keeper.current_keeper().catch_up(s) >= 1
         done, at, final = _marks(s, eid)
         assert final and at == done
-        assert keeper.KEEPER.catch_up(s) == 0  # nothing behind any more
+        assert keeper.current_keeper().catch_up(s) == 0  # nothing behind any more
 
 
 def test_a_prefed_map_refreshes_to_the_whole_rewrite(sessions, named_object) -> None:
@@ -179,7 +180,7 @@ def test_a_prefed_map_refreshes_to_the_whole_rewrite(sessions, named_object) -> 
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
         kept = stored(s, eid)
-        service.MAPS.clear()
+        current().maps.clear()
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
         assert stored(s, eid) == kept and len(kept[0]) >= 2

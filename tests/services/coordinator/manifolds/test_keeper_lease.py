@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
+from graspscape.services.coordinator import state
 from graspscape.services.coordinator.app import create_app
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import create_exploration
@@ -43,7 +44,7 @@ def _store(s: Any, tiles: list[Any], finisher: keeper.Keeper | None = None) -> N
 
 def _the_whole_rewrite(s: Any, eid: int) -> None:
     kept = stored(s, eid)
-    service.MAPS.clear()  # a restarted process: read everything, write it whole
+    state.current().maps.clear()  # a restarted process: read everything, write it whole
     service.refresh_manifolds(s, eid, final=True)
     s.commit()
     assert stored(s, eid) == kept and len(kept[0]) >= 2
@@ -79,7 +80,7 @@ def test_one_keeper_refreshes_another_takes_over_when_the_lease_runs_out(
 
         _store(s, tiles[2 * quarter:3 * quarter])
         later = t0 + timedelta(seconds=10 + keeper.LEASE_S + 60)  # first's lease ran out
-        service.MAPS.clear()  # the second process's map: the table read once (live._adopt)
+        state.current().maps.clear()  # the second process's map: the table read once (live._adopt)
         assert second.keep(s, eid, now=later)
         assert _lease(s, eid)[0] == second.me
         done, at, final = _marks(s, eid)
@@ -161,11 +162,13 @@ def test_a_coordinator_gives_its_leases_back_when_it_stops(
         settings, sessions, named_object, monkeypatch) -> None:
     monkeypatch.setattr(keeper, "REFRESH_MIN_POSES", 20)
     spec = sphere_grid(named_object, dtheta_deg=30, r_max=0.02, rolls=2)
+    app = create_app(settings)
+    apps_keeper = state.of(app).keeper
     with sessions() as s:
         eid = create_exploration(s, spec=spec, tile_target_poses=8, max_poses=10**6).id
-        _store(s, _leased(s)[:4], finisher=keeper.KEEPER)  # the process's keeper: the app's
-        assert _lease(s, eid)[0] == keeper.KEEPER.me
-    with TestClient(create_app(settings)):
+        _store(s, _leased(s)[:4], finisher=apps_keeper)
+        assert _lease(s, eid)[0] == apps_keeper.me
+    with TestClient(app):
         pass
     with sessions() as s:
         assert _lease(s, eid) == (None, None)

@@ -9,6 +9,7 @@ import math
 from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds import service
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow, PoseRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -63,7 +64,7 @@ def test_refreshes_tile_by_tile_store_the_whole_rewrite(sessions, named_object) 
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
         incremental = stored(s, eid)
-        service.MAPS.clear()  # a restarted process: read everything, write it whole
+        current().maps.clear()  # a restarted process: read everything, write it whole
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
         assert stored(s, eid) == incremental
@@ -90,7 +91,7 @@ def test_a_table_written_by_another_process_is_written_whole(sessions, named_obj
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
         after = stored(s, eid)
-        service.MAPS.clear()
+        current().maps.clear()
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
         assert stored(s, eid) == after
@@ -129,7 +130,7 @@ def test_a_restart_loads_the_saved_map_and_reads_only_the_rows_since(
             s.commit()
         saved = list(tmp_path.iterdir())
         assert len(saved) == 1
-        service.MAPS.clear()  # a restart
+        current().maps.clear()  # a restart
         ingest(tiles[-1])
         service.refresh_manifolds(s, eid, final=True)
         s.commit()
@@ -139,7 +140,7 @@ def test_a_restart_loads_the_saved_map_and_reads_only_the_rows_since(
         assert rows < state.rows == s.get(ExplorationRow, eid).poses_done
         after = stored(s, eid)
         # The same store as a map rebuilt from every row writes into an empty table.
-        service.MAPS.clear()
+        current().maps.clear()
         saved[0].unlink()
         s.execute(PoseRow.__table__.update().where(PoseRow.exploration_id == eid)
                   .values(manifold_id=None, robust_s=None, robust_q=None, robust_label=None))

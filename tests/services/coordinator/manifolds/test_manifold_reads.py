@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Hashable
 
 from graspscape.services.coordinator import db
 from graspscape.services.coordinator.api import answers
@@ -17,6 +18,7 @@ from graspscape.services.coordinator.manifolds.grouping import label_name
 from graspscape.services.coordinator.manifolds.service import ensure_manifolds
 from graspscape.services.coordinator.manifolds.summary import ManifoldSummary
 from graspscape.services.coordinator.manifolds.table import table_document
+from graspscape.services.coordinator.state import Bounded, of
 from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from pydantic import TypeAdapter
@@ -48,7 +50,7 @@ def test_manifold_reads_are_the_stored_summaries(client, object_id, sessions) ->
         expected = ManifoldList.model_validate({k: v for k, v in document.items() if k != "table"})
     # Edited by hand, behind the map's version (every real write moves it): the answers kept
     # for the version are the unedited ones, so forget them (api/answers.py).
-    answers.clear()
+    answers.clear(of(client.app))
     assert len(got.manifolds) >= 2 and got.final
     listed = client.get(f"/explorations/{eid}/manifolds").json()
     assert listed == json.loads(expected.model_dump_json())
@@ -98,7 +100,7 @@ def _kept_per_version(client, object_id, sessions) -> int:  # type: ignore[no-un
     pages = TypeAdapter(CursorPage[PoseOut])
     assert pages.dump_json(pages.validate_json(page)) == page
     assert read() == first  # kept
-    answers.clear()
+    answers.clear(of(client.app))
     assert read() == first  # and what computing it again gives
     with sessions() as s:
         for t in tiles[half:]:
@@ -109,7 +111,7 @@ def _kept_per_version(client, object_id, sessions) -> int:  # type: ignore[no-un
     assert listed[0]["final"] and not listed[1]["final"]
     assert (sum(m["pose_count"] for m in listed[0]["manifolds"])
             > sum(m["pose_count"] for m in listed[1]["manifolds"]))
-    answers.clear()
+    answers.clear(of(client.app))
     assert read() == after
     return eid
 
@@ -152,12 +154,10 @@ def _evidence_samples(sessions, eid: int) -> None:  # type: ignore[no-untyped-de
     assert by_key == {p: dataclasses.replace(every[p], grasp=None) for p in points}
 
 
-def test_kept_answers_are_bounded_by_count_and_bytes(monkeypatch) -> None:
-    """Least recently used out, beyond CACHED_ANSWERS answers or CACHED_BYTES bytes; an
-    answer is computed once while kept."""
-    monkeypatch.setattr(answers, "CACHED_ANSWERS", 3)
-    monkeypatch.setattr(answers, "CACHED_BYTES", 100)
-    answers.clear()
+def test_kept_answers_are_bounded_by_count_and_bytes() -> None:
+    """Least recently used out, beyond the state's count or bytes (state.Bounded); an answer
+    is computed once while kept."""
+    kept: Bounded[Hashable, bytes] = Bounded(3, max_bytes=100, size=len)
     calls: list[int] = []
 
     def body(i: int, size: int = 30) -> bytes:
@@ -165,10 +165,10 @@ def test_kept_answers_are_bounded_by_count_and_bytes(monkeypatch) -> None:
         return bytes([i]) * size
 
     for i in range(4):
-        assert answers.answer(i, lambda i=i: body(i)) == bytes([i]) * 30
-    assert answers.answer(3, lambda: body(99)) == bytes([3]) * 30  # kept: not computed
+        assert answers.answer(i, lambda i=i: body(i), kept) == bytes([i]) * 30
+    assert answers.answer(3, lambda: body(99), kept) == bytes([3]) * 30  # kept: not computed
     assert calls == [0, 1, 2, 3]
-    assert answers.answer(0, lambda: body(0)) and calls[-1] == 0  # out by count: computed
-    assert answers.answer(9, lambda: body(9, 90)) == bytes([9]) * 90  # answered, and alone
-    assert answers.answer(3, lambda: body(3)) and calls[-1] == 3  # out by bytes
-    answers.clear()
+    assert answers.answer(0, lambda: body(0), kept) and calls[-1] == 0  # out by count
+    assert answers.answer(9, lambda: body(9, 90), kept) == bytes([9]) * 90  # answered, alone
+    assert answers.answer(3, lambda: body(3), kept) and calls[-1] == 3  # out by bytes
+    assert len(kept) == 1

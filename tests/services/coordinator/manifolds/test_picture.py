@@ -18,6 +18,7 @@ from graspscape.services.coordinator.manifolds.service import compute_map
 from graspscape.services.coordinator.maps import render
 from graspscape.services.coordinator.maps.picture import picture_bytes
 from graspscape.services.coordinator.maps.points import MapPoints, _lattice_indices, stored_points
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.exploration import ExplorationSpec, PoseGridSpec
 from graspscape.shared.specs.pose import Pose
@@ -258,7 +259,7 @@ def test_a_finished_maps_default_picture_is_drawn_ahead_and_read_from_its_row(
     """The refresh to final draws the default picture after its commit and stores it with the
     map version (maps/stored.py); a process that has not drawn it reads the row, at that
     version only."""
-    from graspscape.services.coordinator.maps import picture, stored
+    from graspscape.services.coordinator.maps import stored
     from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
     from sqlalchemy import select, update
 
@@ -268,7 +269,7 @@ def test_a_finished_maps_default_picture_is_drawn_ahead_and_read_from_its_row(
         kept = s.scalars(select(MapPictureRow).where(MapPictureRow.exploration_id == eid)).one()
         assert kept.png.startswith(b"\x89PNG") and kept.version == stored.version_text(row)
         png = kept.png
-    picture._cache.clear()  # another process: nothing drawn in its memory
+    current().pictures.clear()  # another process: nothing drawn in its memory
 
     def no_render(*_args, **_kwargs):
         raise AssertionError("drawn again")
@@ -282,6 +283,6 @@ def test_a_finished_maps_default_picture_is_drawn_ahead_and_read_from_its_row(
         # A row of another version is not served.
         s.execute(update(MapPictureRow).values(version="older"))
         s.commit()
-        picture._cache.clear()
+        current().pictures.clear()
         with pytest.raises(AssertionError, match="drawn again"):
             picture_bytes(s, eid, "png", title=title)

@@ -12,6 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 from graspscape.services.coordinator.api import answers
 from graspscape.services.coordinator.exploration.service import create_exploration
+from graspscape.services.coordinator.state import of
 from graspscape.services.coordinator.store.models import ManifoldRow, PoseRow
 from graspscape.services.local.run import run_local
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -130,7 +131,7 @@ def _check_best(client: TestClient, sessions, explored: tuple[int, str, str]) ->
         s.execute(update(PoseRow).where(PoseRow.exploration_id == eid,
                                         PoseRow.pose_key.in_(keys)).values(certifies=north))
         s.commit()
-    answers.clear()  # edited by hand, behind the map's version (api/answers.py)
+    answers.clear(of(client.app))  # edited by hand, behind the map's version (api/answers.py)
     top = _best(client, eid)["poses"][0]
     assert (top["evidence"]["certifying"], top["evidence"]["certifying_held"]) == (2, 2)
 

@@ -19,6 +19,7 @@ from graspscape.services.coordinator.maps.points import (
     _point_order,
     stored_points,
 )
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import ExplorationRow, ManifoldRow, PoseRow
 from graspscape.shared.specs.exploration import PoseGridSpec
 from graspscape.shared.specs.pose import Pose
@@ -152,8 +153,8 @@ def test_a_stored_default_picture_served_reads_the_other_cuts_inputs_ahead(
     with sessions() as s:
         stored.store_default(s, eid)
         s.commit()
-    picture._cache.clear()
-    picture._inputs.clear()  # another process, or a restart: nothing read yet
+    current().pictures.clear()
+    current().picture_inputs.clear()  # another process, or a restart: nothing read yet
     reads = []  # the version's points read: from the poses, or stored with the picture
     read, load = points.stored_points, stored.stored_points_at
     monkeypatch.setattr(points, "stored_points", lambda *a, **k: reads.append(1) or read(*a, **k))
@@ -167,10 +168,10 @@ def test_a_stored_default_picture_served_reads_the_other_cuts_inputs_ahead(
     monkeypatch.setattr(stored, "stored_points_at", counted_load)
     with sessions() as s:
         picture.picture_bytes(s, eid, "png", title=stored.default_title(eid))
-        assert reads == [] or picture._ahead  # the stored picture: read in the background
+        assert reads == [] or current().reading_ahead  # the stored picture: read in the background
         picture.wait_read_ahead()
         assert reads == [1]
-        (kept, _), = picture._inputs.values()
+        (kept, _), = current().picture_inputs.values()
         assert {k[0] for k in kept.memo} == {"directions", "known", "markers", "marker positions"}
         picture.picture_bytes(s, eid, "png", cut="vertical")
         assert reads == [1]  # the cut drew from what was read ahead

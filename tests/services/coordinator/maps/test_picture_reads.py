@@ -16,6 +16,7 @@ from graspscape.services.coordinator.exploration.scheduler import ingest_results
 from graspscape.services.coordinator.exploration.service import create_exploration
 from graspscape.services.coordinator.manifolds.service import ensure_manifolds
 from graspscape.services.coordinator.maps import panel, picture, points, render, stored
+from graspscape.services.coordinator.state import current
 from graspscape.services.coordinator.store.models import ExplorationRow, MapPictureRow
 from graspscape.services.coordinator.store.queue import lease_tiles
 from graspscape.shared.specs.exploration import ExplorationSpec
@@ -50,7 +51,7 @@ def _previous_drawing(monkeypatch: pytest.MonkeyPatch, *args: object, **kwargs: 
 def test_a_kept_3d_view_gives_the_previous_codes_picture_pixel_for_pixel(monkeypatch) -> None:
     mesh, lattice, pts, summary = _ring_map()
     panel.clear()
-    drawn, reused = panel.stats["drawn"], panel.stats["reused"]
+    drawn, reused = current().panel_stats["drawn"], current().panel_stats["reused"]
     # The 3D view's place moves with the cut's tick labels: these pairs share one.
     for cut, r_level in (("vertical", None), ("vertical", 0.01), ("horizontal", 0.01),
                          ("horizontal", 0.02)):
@@ -60,7 +61,8 @@ def test_a_kept_3d_view_gives_the_previous_codes_picture_pixel_for_pixel(monkeyp
                                 title="t", r_level=r_level)
         assert np.array_equal(_pixels(new), _pixels(old)), (cut, r_level)
     # Drawn at each of the two places, put back at the second picture of each.
-    assert (panel.stats["drawn"] - drawn, panel.stats["reused"] - reused) == (2, 2)
+    stats = current().panel_stats
+    assert (stats["drawn"] - drawn, stats["reused"] - reused) == (2, 2)
 
 
 def test_a_3d_view_is_neither_kept_nor_put_back_where_something_else_drew() -> None:
@@ -80,15 +82,15 @@ def test_a_3d_view_is_neither_kept_nor_put_back_where_something_else_drew() -> N
         panel.reuse_panel(ax, ax3, "key")
         fig.savefig(io.BytesIO(), format="png", dpi=50)
 
-    drawn, reused = panel.stats["drawn"], panel.stats["reused"]
+    drawn, reused = current().panel_stats["drawn"], current().panel_stats["reused"]
     draw(spill=True)
-    assert not panel._kept and panel.stats["drawn"] == drawn + 1
+    assert not current().panels and current().panel_stats["drawn"] == drawn + 1
     draw(spill=False)
-    assert len(panel._kept) == 1
+    assert len(current().panels) == 1
     draw(spill=True)  # kept now, yet not put back over the label
-    assert panel.stats["reused"] == reused and panel.stats["drawn"] == drawn + 3
+    assert current().panel_stats["reused"] == reused and current().panel_stats["drawn"] == drawn + 3
     draw(spill=False)
-    assert panel.stats["reused"] == reused + 1
+    assert current().panel_stats["reused"] == reused + 1
 
 
 def _grid(sessions, object_id: int, tiles: int | None = None) -> int:  # type: ignore[no-untyped-def]
@@ -122,7 +124,7 @@ def test_what_a_picture_is_drawn_from_is_read_once_per_map_version(
     reads = []
     read = points.stored_points
     monkeypatch.setattr(points, "stored_points", lambda *a, **k: reads.append(1) or read(*a, **k))
-    picture._inputs.clear()
+    current().picture_inputs.clear()
     with sessions() as s:
         vertical = picture.picture_bytes(s, eid, "png", cut="vertical")
         other = picture.picture_bytes(s, eid, "png", cut="vertical", phi0_deg=60.0)
@@ -154,7 +156,7 @@ def test_a_running_maps_default_picture_is_drawn_ahead_and_served_only_at_its_ve
         kept = s.scalars(select(MapPictureRow).where(MapPictureRow.exploration_id == eid)).one()
         assert kept.version == stored.version_text(row)
         png, poses = kept.png, kept.poses
-    picture._cache.clear()  # another process: nothing drawn in its memory
+    current().pictures.clear()  # another process: nothing drawn in its memory
     drawn = []
     draw = render.render_map
     monkeypatch.setattr(render, "render_map", lambda *a, **k: drawn.append(1) or draw(*a, **k))
@@ -170,7 +172,7 @@ def test_a_running_maps_default_picture_is_drawn_ahead_and_served_only_at_its_ve
         assert later[2] > poses and drawn  # drawn at the new version, not the stored one
         # A map whose draw took long is drawn ahead less often (RUNNING_DRAW_SHARE): this
         # refresh, within 10 × that draw, is not.
-        stored._draw_seconds[(str(s.get_bind().url), eid)] = 1e6
+        current().draw_seconds[(str(s.get_bind().url), eid)] = 1e6
         ensure_manifolds(s, eid)
         stored.wait_prerendered()
         assert s.scalars(select(MapPictureRow.version)
@@ -218,16 +220,16 @@ def test_a_process_that_has_not_read_a_version_loads_the_points_stored_with_its_
     reads = []
     read = points.stored_points
     monkeypatch.setattr(points, "stored_points", lambda *a, **k: reads.append(1) or read(*a, **k))
-    picture._cache.clear()  # another process: nothing drawn or read in its memory
-    picture._inputs.clear()
+    current().pictures.clear()  # another process: nothing drawn or read in its memory
+    current().picture_inputs.clear()
     with sessions() as s:
         got = picture.picture_bytes(s, eid, "png", cut="vertical", phi0_deg=60.0)
         assert not reads and got[1:] == expected[1:]
         assert np.array_equal(_pixels(got[0]), _pixels(expected[0]))
         s.execute(update(MapPictureRow).values(version="older"))
         s.commit()
-        picture._cache.clear()
-        picture._inputs.clear()
+        current().pictures.clear()
+        current().picture_inputs.clear()
         assert picture.picture_bytes(s, eid, "png", cut="vertical", phi0_deg=60.0)[1:] == (
             expected[1:])
         assert reads == [1]  # read from the poses: the stored points are another version's
