@@ -245,7 +245,7 @@ def score_object(name: str, run: dict, counts: dict, model_name: str, pool, fres
         rows.append({
             "key": k, "manifold": run["label"].get(k), "k": e.k, "n": e.n, "p": e.p,
             "lower": e.lower, "upper": e.upper, "certified": e.certified,
-            "fresh_survival": sum(ok for _, ok in f) / len(f),
+            "fresh_survival": sum(ok for _, ok in f) / len(f), "fresh_n": len(f),
             "fresh_held_at_all": sum(h for h, _ in f) / len(f),
             "robust_s": None if sc is None else sc.s, "robust_q": None if sc is None else sc.q,
             "mu_s": samples[k].mu_s, "torque_margin": torque.get(k),

@@ -6,9 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import rankdata
+from scipy.stats import beta, rankdata
 
 LEVEL = 0.9
+CONFIDENCE = 0.95
 
 
 def auc(scores: list[float], positive: list[bool]) -> float | None:
@@ -32,6 +33,16 @@ def _score(row: dict, name: str) -> float:
     return row["torque_margin"] or 0.0
 
 
+def fresh_rejects(row: dict) -> bool:
+    """The fresh draws contradict a certification: their one-sided Clopper–Pearson upper
+    bound (95 %) lies below the level. A claim that is true is contradicted at most 5 % of the
+    time, where a fresh frequency below the level happens up to half the time at P = 0.9."""
+    n = row["fresh_n"]
+    k = round(row["fresh_survival"] * n)
+    upper = 1.0 if k >= n else float(beta.ppf(CONFIDENCE, k + 1, n - k))
+    return upper < LEVEL
+
+
 def _mean(xs: list[float]) -> float | None:
     return round(float(np.mean(xs)), 4) if xs else None
 
@@ -52,6 +63,8 @@ def _pooled(rows: list[dict], rankings: tuple[str, ...]) -> dict[str, float | in
     out["certified_poses"] = len(cert)
     out["false_certification_share"] = (
         round(sum(r["fresh_survival"] < LEVEL for r in cert) / len(cert), 4) if cert else None)
+    out["false_certification_rejected_share"] = (
+        round(sum(fresh_rejects(r) for r in cert) / len(cert), 4) if cert else None)
     return out
 
 
