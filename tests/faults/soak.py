@@ -164,11 +164,18 @@ def soak(work: Path, *, tiles: int, procs: int = 3, kill_every_tiles: int | None
         while (worker.output().count("starting it again") < len(kills)
                and time.monotonic() < deadline):
             time.sleep(0.2)
-        time.sleep(2)
+        # Then each live process's zenoh session, established (a replacement's can follow its
+        # log line by seconds under load) and the killed ones' closed: waited for, not slept
+        # on. A session that stays open past the deadline is what the caller's check catches.
+        deadline = time.monotonic() + 30
+        while True:
+            live = len([pid for pid in children_of(worker.pid) if "resource_tracker" not in
+                        Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")])
+            connections = _established(zenoh_port)
+            if connections == live or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
         fd_kinds_last = fd_kinds(coordinator.pid)
-        live = len([pid for pid in children_of(worker.pid) if "resource_tracker" not in
-                    Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")])
-        connections = _established(zenoh_port)
         with sessions() as session:
             status = session.get(ExplorationRow, exploration_id).status
         result_tally = tally(sessions, exploration_id)
