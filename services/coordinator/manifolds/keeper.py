@@ -119,8 +119,12 @@ class Keeper:
         try:
             behind = _behind(session, exploration_id)  # again: another may have just done it
             session.rollback()  # the lease's UPDATE first in its transaction (SQLite's WAL)
-            if behind is None or not self._take(session, exploration_id, now,
-                                                force=behind.pressing):
+            if behind is None:
+                return False
+            # A lease this keeper holds is renewed in the write's transaction below; taking
+            # it again first would be a second write and commit for the same refresh.
+            if not behind.held_by(self.me, now) and not self._take(
+                    session, exploration_id, now, force=behind.pressing):
                 return False
             cpu, wall = time.process_time(), time.perf_counter()
             # The new rows fed first without the exploration's row lock: the batches of this
@@ -214,6 +218,9 @@ class Behind:
         """Refreshed by whoever gets here, lease or not: the final table, or a table more
         than MAX_LAG_POSES behind (its keeper too slow, or gone)."""
         return self.finished or self.lag > MAX_LAG_POSES
+
+    def held_by(self, me: str, now: datetime) -> bool:
+        return self.keeper == me and self.keeper_until is not None and self.keeper_until >= now
 
     def kept_by_other(self, me: str, now: datetime) -> bool:
         return (self.keeper is not None and self.keeper != me
